@@ -1,0 +1,43 @@
+"""Typed exceptions. Each message names the file or parameter, the bad value and what is accepted."""
+
+from __future__ import annotations
+
+
+class BrdffitError(Exception):
+    """Base class of every error brdffit raises on purpose."""
+
+
+class MeasurementFileError(BrdffitError, ValueError):
+    """A measurement file is missing, unreadable or malformed; ``path`` names it."""
+
+    def __init__(self, path: object, problem: str) -> None:
+        self.path = str(path)
+        self.problem = problem
+        super().__init__(f"{self.path}: {problem}")
+
+
+class ParameterError(BrdffitError, ValueError):
+    """A parameter name, value, shape or option is not accepted by a model or a call."""
+
+
+class MeasurementsError(BrdffitError, ValueError):
+    """Arrays given to build measurements have the wrong shape, dtype or content."""
+
+
+class FitError(BrdffitError, RuntimeError):
+    """A fit failed and ``throw=True`` was asked for; ``result`` still holds what was found."""
+
+    def __init__(self, message: str, result: object = None) -> None:
+        self.result = result
+        super().__init__(message)
+
+
+class ChainTooShortError(BrdffitError, RuntimeError):
+    """An MCMC chain is shorter than the asked number of autocorrelation times.
+
+    ``estimate`` carries the autocorrelation times measured anyway.
+    """
+
+    def __init__(self, message: str, estimate: object = None) -> None:
+        self.estimate = estimate
+        super().__init__(message)

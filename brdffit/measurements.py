@@ -1,0 +1,179 @@
+"""One container for measured or synthetic reflectance samples.
+
+A :class:`Measurements` holds N samples: the directions ``wi`` and ``wo`` (N, 3) in the
+local shading frame, their Rusinkiewicz angles, linear RGB BRDF values (N, 3) in 1/sr
+(no cosine), per-sample weights (N,) (the solid angle ``dwi dwo`` in sr^2 a sample
+stands for), a validity mask (N,) and provenance. Arrays are read-only numpy arrays;
+the container is frozen and never changed by a fit.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from brdffit.errors import MeasurementsError
+from brdffit.geometry import above_horizon, fold_phi_d, io_to_halfdiff
+
+
+def _frozen(a: np.ndarray) -> np.ndarray:
+    a = np.ascontiguousarray(a)
+    a.setflags(write=False)
+    return a
+
+
+@dataclass(frozen=True, eq=False)
+class Measurements:
+    """Reflectance samples; build with :meth:`from_directions` or a reader.
+
+    Fields:
+    - ``wi``, ``wo``: (N, 3) unit directions, light and viewer.
+    - ``theta_h``, ``theta_d``, ``phi_d``: (N,) Rusinkiewicz angles (radians),
+      ``phi_d`` folded into [0, pi).
+    - ``values``: (N, 3) linear RGB BRDF in 1/sr, without the cosine.
+    - ``weights``: (N,) solid-angle measure of each sample, sr^2.
+    - ``valid``: (N,) True where the sample was measured and both directions lie
+      above the horizon. Invalid samples are kept (file order) but never fitted.
+    - ``source``: where the samples came from (a path or a description).
+    - ``channel_scales``: (3,) RGB scales applied to the raw numbers (MERL: 1/1500,
+      1.15/1500, 1.66/1500; 1 for data already in 1/sr).
+    - ``grid``: the MERL table shape when the samples are a full MERL table in file
+      order, else ``None``.
+    """
+
+    wi: np.ndarray
+    wo: np.ndarray
+    theta_h: np.ndarray
+    theta_d: np.ndarray
+    phi_d: np.ndarray
+    values: np.ndarray
+    weights: np.ndarray
+    valid: np.ndarray
+    source: str = "unknown"
+    channel_scales: np.ndarray = field(default_factory=lambda: np.ones(3))
+    grid: tuple[int, int, int] | None = None
+
+    def __post_init__(self) -> None:
+        n = np.shape(self.wi)[0] if np.ndim(self.wi) == 2 else -1
+        expected = {
+            "wi": (n, 3),
+            "wo": (n, 3),
+            "theta_h": (n,),
+            "theta_d": (n,),
+            "phi_d": (n,),
+            "values": (n, 3),
+            "weights": (n,),
+            "valid": (n,),
+            "channel_scales": (3,),
+        }
+        for name, shape in expected.items():
+            arr = np.asarray(getattr(self, name))
+            if arr.shape != shape:
+                raise MeasurementsError(
+                    f"Measurements.{name} has shape {arr.shape}; expected {shape} "
+                    f"(N = {n} samples from wi)"
+                )
+            dtype = bool if name == "valid" else np.float64
+            object.__setattr__(self, name, _frozen(arr.astype(dtype, copy=False)))
+        if self.grid is not None and int(np.prod(self.grid)) != n:
+            raise MeasurementsError(f"Measurements.grid {self.grid} does not hold N = {n} samples")
+
+    @classmethod
+    def from_directions(
+        cls,
+        wi: np.ndarray,
+        wo: np.ndarray,
+        values: np.ndarray,
+        *,
+        weights: np.ndarray | None = None,
+        valid: np.ndarray | None = None,
+        source: str = "unknown",
+        channel_scales: np.ndarray | None = None,
+        grid: tuple[int, int, int] | None = None,
+    ) -> Measurements:
+        """Build from directions and values; angles are derived, invalid cells marked.
+
+        ``weights`` defaults to equal weights summing to ``(2 pi)^2`` (samples spread
+        uniformly over both hemispheres). Samples with a non-finite or negative value
+        (any channel) or a direction below the horizon are marked invalid in addition
+        to ``valid``.
+        """
+        wi = np.asarray(wi, float)
+        wo = np.asarray(wo, float)
+        values = np.asarray(values, float)
+        if wi.ndim != 2 or wi.shape[-1] != 3 or wo.shape != wi.shape:
+            raise MeasurementsError(
+                f"wi and wo must both be (N, 3); got {wi.shape} and {wo.shape}"
+            )
+        if values.shape != wi.shape:
+            raise MeasurementsError(f"values must be (N, 3) = {wi.shape}; got {values.shape}")
+        n = wi.shape[0]
+        theta_h, theta_d, phi_d, _ = io_to_halfdiff(wi, wo)
+        ok = above_horizon(wi, wo) & np.all(np.isfinite(values), axis=-1)
+        ok &= np.all(values >= 0.0, axis=-1)
+        if valid is not None:
+            ok &= np.asarray(valid, bool)
+        if weights is None:
+            weights = np.full(n, (2 * np.pi) ** 2 / max(n, 1))
+        clean = np.where(np.isfinite(values), values, -1.0)
+        return cls(
+            wi=wi,
+            wo=wo,
+            theta_h=theta_h,
+            theta_d=theta_d,
+            phi_d=fold_phi_d(phi_d),
+            values=clean,
+            weights=np.asarray(weights, float),
+            valid=ok,
+            source=source,
+            channel_scales=np.ones(3) if channel_scales is None else channel_scales,
+            grid=grid,
+        )
+
+    @property
+    def n(self) -> int:
+        """Number of samples, valid or not."""
+        return int(self.wi.shape[0])
+
+    @property
+    def n_valid(self) -> int:
+        """Number of valid samples."""
+        return int(np.count_nonzero(self.valid))
+
+    def replace(self, **changes: object) -> Measurements:
+        """A copy with some fields changed (the original is untouched)."""
+        return dataclasses.replace(self, **changes)
+
+    def select(self, mask_or_index: np.ndarray) -> Measurements:
+        """The subset of samples picked by a boolean mask or an index array (no grid)."""
+        sel = np.asarray(mask_or_index)
+        return Measurements(
+            wi=self.wi[sel],
+            wo=self.wo[sel],
+            theta_h=self.theta_h[sel],
+            theta_d=self.theta_d[sel],
+            phi_d=self.phi_d[sel],
+            values=self.values[sel],
+            weights=self.weights[sel],
+            valid=self.valid[sel],
+            source=self.source,
+            channel_scales=self.channel_scales,
+            grid=None,
+        )
+
+    def summary(self) -> str:
+        """A few lines for ``brdffit info``: size, validity, value range, provenance."""
+        v = self.values[self.valid]
+        lines = [
+            f"source          {self.source}",
+            f"samples         {self.n} ({self.n_valid} valid, {self.n - self.n_valid} masked)",
+            f"grid            {self.grid if self.grid else 'scattered directions'}",
+            f"channel scales  {', '.join(f'{s:.6g}' for s in self.channel_scales)}",
+        ]
+        if v.size:
+            for c, name in enumerate("RGB"):
+                lo, med, hi = np.percentile(v[:, c], [0, 50, 100])
+                lines.append(f"{name} (1/sr)        min {lo:.4g}  median {med:.4g}  max {hi:.4g}")
+        return "\n".join(lines)

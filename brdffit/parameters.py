@@ -1,0 +1,198 @@
+"""Model parameters: the table row, the optimiser transforms and flat packing.
+
+Every parameter has a name, a shape (``()`` scalar or ``(3,)`` RGB), bounds
+``(low, high)``, a default and the transform the optimiser works through:
+
+* ``"identity"``: ``x = u`` (bounds are then only the prior's support);
+* ``"logit"``: ``x = low + (high - low) sigmoid(u)``, for finite bounds;
+* ``"log"``: ``x = exp(u)`` when ``low == 0`` and ``high == inf``; ``low + exp(u)``
+  when ``low > 0`` and ``high == inf``; and ``x = low (high/low)^sigmoid(u)`` (a logit
+  in log space) when both bounds are finite and positive.
+
+Fits run in the unconstrained ``u`` space; reports are in the natural ``x`` space.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Literal
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from brdffit.errors import ParameterError
+
+Transform = Literal["identity", "logit", "log"]
+Params = dict[str, jax.Array]
+
+
+@dataclass(frozen=True)
+class Parameter:
+    """One row of a model's parameter table.
+
+    Fields: ``name``; ``shape`` ``()`` or ``(3,)``; ``bounds`` (low, high) in natural
+    units; ``default`` (a float, broadcast to the shape); ``transform``; ``doc`` the
+    meaning with its unit; ``linear`` True when the BRDF is affine in the parameter
+    (albedos, Fresnel F0), so a linear least-squares solve can start it.
+    """
+
+    name: str
+    shape: tuple[int, ...]
+    bounds: tuple[float, float]
+    default: float
+    transform: Transform
+    doc: str
+    linear: bool = False
+
+    def __post_init__(self) -> None:
+        lo, hi = self.bounds
+        if not lo < hi:
+            raise ParameterError(f"parameter {self.name!r}: bounds {self.bounds} need low < high")
+        if not lo <= self.default <= hi:
+            raise ParameterError(
+                f"parameter {self.name!r}: default {self.default} outside bounds {self.bounds}"
+            )
+        if self.transform == "logit" and not (math.isfinite(lo) and math.isfinite(hi)):
+            raise ParameterError(f"parameter {self.name!r}: 'logit' needs finite bounds")
+        if self.transform == "log" and (lo < 0 or (lo == 0 and math.isfinite(hi))):
+            raise ParameterError(
+                f"parameter {self.name!r}: 'log' needs low >= 0, and low > 0 when high is finite"
+            )
+        if self.shape not in ((), (3,)):
+            raise ParameterError(f"parameter {self.name!r}: shape {self.shape} not () or (3,)")
+
+    @property
+    def size(self) -> int:
+        """Number of scalars in the parameter (1 or 3)."""
+        return int(np.prod(self.shape, dtype=int))
+
+    def default_array(self, dtype: jnp.dtype = jnp.float64) -> jax.Array:
+        """The default broadcast to the parameter's shape."""
+        return jnp.full(self.shape, self.default, dtype=dtype)
+
+    def to_natural(self, u: jax.Array) -> jax.Array:
+        """Unconstrained ``u`` -> natural value ``x`` (see module docstring)."""
+        lo, hi = self.bounds
+        if self.transform == "identity":
+            return u
+        if self.transform == "logit":
+            return lo + (hi - lo) * jax.nn.sigmoid(u)
+        if math.isfinite(hi):
+            return lo * jnp.exp(math.log(hi / lo) * jax.nn.sigmoid(u))
+        return lo + jnp.exp(u)
+
+    def to_unconstrained(self, x: jax.Array) -> jax.Array:
+        """Natural ``x`` -> unconstrained ``u``; ``x`` is first nudged inside the bounds."""
+        lo, hi = self.bounds
+        x = jnp.asarray(x)
+        if self.transform == "identity":
+            return x
+        if self.transform == "logit":
+            t = jnp.clip((x - lo) / (hi - lo), 1e-12, 1 - 1e-12)
+            return jnp.log(t) - jnp.log1p(-t)
+        if math.isfinite(hi):
+            t = jnp.clip(jnp.log(jnp.maximum(x, lo) / lo) / math.log(hi / lo), 1e-12, 1 - 1e-12)
+            return jnp.log(t) - jnp.log1p(-t)
+        return jnp.log(jnp.maximum(x - lo, 1e-300))
+
+    def check_value(self, value: object) -> jax.Array:
+        """Validate a user value: finite, broadcastable to the shape, inside the bounds."""
+        arr = np.asarray(value, dtype=float)
+        try:
+            arr = np.broadcast_to(arr, self.shape)
+        except ValueError:
+            raise ParameterError(
+                f"parameter {self.name!r}: value of shape {np.shape(value)} does not fit "
+                f"shape {self.shape}"
+            ) from None
+        lo, hi = self.bounds
+        if not np.all(np.isfinite(arr)) or np.any(arr < lo) or np.any(arr > hi):
+            raise ParameterError(
+                f"parameter {self.name!r}: value {arr.tolist()} outside bounds [{lo}, {hi}]"
+            )
+        return jnp.asarray(arr.copy())
+
+
+@dataclass(frozen=True)
+class ParameterLayout:
+    """Packs the free parameters of a table into one flat vector and back.
+
+    ``free`` lists the free parameters in table order, ``frozen`` maps the frozen
+    ones to their fixed natural values.
+    """
+
+    free: tuple[Parameter, ...]
+    frozen: Mapping[str, jax.Array]
+
+    @classmethod
+    def build(
+        cls,
+        table: Sequence[Parameter],
+        freeze: Mapping[str, object] | None = None,
+    ) -> ParameterLayout:
+        """Split ``table`` into free and frozen parameters; ``freeze`` maps name -> value."""
+        freeze = dict(freeze or {})
+        names = {p.name for p in table}
+        unknown = sorted(set(freeze) - names)
+        if unknown:
+            raise ParameterError(
+                f"cannot freeze unknown parameter(s) {unknown}; the model has {sorted(names)}"
+            )
+        frozen = {p.name: p.check_value(freeze[p.name]) for p in table if p.name in freeze}
+        return cls(free=tuple(p for p in table if p.name not in freeze), frozen=frozen)
+
+    @property
+    def size(self) -> int:
+        """Length of the flat vector of free scalars."""
+        return sum(p.size for p in self.free)
+
+    def labels(self) -> list[str]:
+        """One label per free scalar: ``name`` or ``name[c]`` for RGB channels."""
+        out = []
+        for p in self.free:
+            out += [p.name] if p.shape == () else [f"{p.name}[{c}]" for c in "rgb"]
+        return out
+
+    def split(self, flat: jax.Array) -> Params:
+        """Flat free vector -> dict of the free parameters (same space as ``flat``)."""
+        out, i = {}, 0
+        for p in self.free:
+            out[p.name] = flat[i : i + p.size].reshape(p.shape)
+            i += p.size
+        return out
+
+    def join(self, params: Mapping[str, jax.Array]) -> jax.Array:
+        """Dict (free parameters, any space) -> flat vector."""
+        if not self.free:
+            return jnp.zeros((0,))
+        return jnp.concatenate([jnp.ravel(jnp.asarray(params[p.name])) for p in self.free])
+
+    def natural(self, u: jax.Array) -> Params:
+        """Flat unconstrained vector -> full natural parameter dict, frozen ones included."""
+        free = self.split(u)
+        out = {p.name: p.to_natural(free[p.name]) for p in self.free}
+        out.update(self.frozen)
+        return out
+
+    def natural_free(self, x: jax.Array) -> Params:
+        """Flat natural vector of the free scalars -> full parameter dict."""
+        out = self.split(x)
+        out.update(self.frozen)
+        return out
+
+    def unconstrained(self, params: Mapping[str, jax.Array]) -> jax.Array:
+        """Natural dict -> flat unconstrained vector of the free parameters."""
+        if not self.free:
+            return jnp.zeros((0,))
+        return jnp.concatenate(
+            [jnp.ravel(p.to_unconstrained(jnp.asarray(params[p.name]))) for p in self.free]
+        )
+
+    def bounds_flat(self) -> tuple[np.ndarray, np.ndarray]:
+        """Lower and upper bounds of each free scalar."""
+        lo = np.concatenate([np.full(p.size, p.bounds[0]) for p in self.free] or [np.zeros(0)])
+        hi = np.concatenate([np.full(p.size, p.bounds[1]) for p in self.free] or [np.zeros(0)])
+        return lo, hi

@@ -1,0 +1,102 @@
+"""Generic properties of every model row in ``cases.CASES``.
+
+Independent of any implementation: positivity, zero below the horizon, reciprocity
+(where the model claims it), invariance under rotation about the normal for
+isotropic models, finite values and gradients on extreme directions and at the
+parameter bounds in float32 and float64, and jit/vmap agreement.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from tests.cases import CASES
+from tests.helpers import extreme_pairs, params_at_bounds, random_pairs, random_params, rotate_z
+
+IDS = [c.id for c in CASES]
+
+
+@pytest.mark.parametrize("case", CASES, ids=IDS)
+def test_positive_and_zero_below_horizon(case):
+    model, params = case.build()
+    wi, wo = random_pairs(0, 512)
+    f = np.asarray(model.eval(params, wi, wo))
+    assert np.all(np.isfinite(f)) and np.all(f >= 0)
+    below = wo * np.array([1, 1, -1])
+    assert np.all(np.asarray(model.eval(params, wi, below)) == 0)
+    assert np.all(np.asarray(model.eval(params, below, wo)) == 0)
+
+
+@pytest.mark.parametrize("case", CASES, ids=IDS)
+@settings(max_examples=15, deadline=None)
+@given(seed=st.integers(0, 2**31 - 1))
+def test_reciprocity_under_random_parameters(case, seed):
+    model, _ = case.build()
+    if not model.reciprocal:
+        pytest.skip(f"{model.name} is not reciprocal (see its docstring)")
+    rng = np.random.default_rng(seed)
+    params = random_params(model, rng)
+    wi, wo = random_pairs(seed, 64)
+    a = np.asarray(model.eval(params, wi, wo))
+    b = np.asarray(model.eval(params, wo, wi))
+    # float64 evaluation; relative 1e-9 leaves room for a few reassociated operations.
+    np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-12)
+
+
+@pytest.mark.parametrize("case", CASES, ids=IDS)
+def test_isotropic_models_ignore_rotation_about_normal(case):
+    model, params = case.build()
+    if not model.isotropic:
+        pytest.skip("anisotropic by construction")
+    wi, wo = random_pairs(1, 256)
+    a = np.asarray(model.eval(params, wi, wo))
+    b = np.asarray(model.eval(params, rotate_z(wi, 0.7), rotate_z(wo, 0.7)))
+    np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-12)
+
+
+@pytest.mark.parametrize("dtype", [jnp.float32, jnp.float64])
+@pytest.mark.parametrize("which", ["case", "low", "high"])
+@pytest.mark.parametrize("case", CASES, ids=IDS)
+def test_extremes_finite_value_and_gradient(case, which, dtype):
+    model, params = case.build()
+    if which != "case":
+        params = params_at_bounds(model, which)
+    wi, wo = extreme_pairs()
+    wi, wo = jnp.asarray(wi, dtype), jnp.asarray(wo, dtype)
+    f = model.eval(params, wi, wo)
+    assert f.dtype == dtype
+    assert bool(jnp.all(jnp.isfinite(f))), f
+
+    def loss(p):
+        return jnp.sum(model.eval(p, wi, wo) * wi[:, 2:3])
+
+    grads = jax.grad(loss)({k: jnp.asarray(v, dtype) for k, v in params.items()})
+    for name, g in grads.items():
+        assert bool(jnp.all(jnp.isfinite(g))), (name, g)
+
+
+@pytest.mark.parametrize("case", CASES, ids=IDS)
+def test_jit_and_vmap_agree_with_eager(case):
+    model, params = case.build()
+    wi, wo = random_pairs(2, 16)
+    eager = model.eval(params, wi, wo)
+    jitted = jax.jit(model.eval)(params, wi, wo)
+    one = jax.vmap(lambda a, b: model.eval(params, a[None], b[None])[0])(jnp.asarray(wi), jnp.asarray(wo))
+    np.testing.assert_allclose(np.asarray(jitted), np.asarray(eager), rtol=1e-12)
+    np.testing.assert_allclose(np.asarray(one), np.asarray(eager), rtol=1e-12)
+
+
+@pytest.mark.parametrize("case", CASES, ids=IDS)
+def test_float32_matches_float64(case):
+    model, params = case.build()
+    wi, wo = random_pairs(3, 256)
+    f64 = np.asarray(model.eval(params, wi, wo))
+    f32 = np.asarray(model.eval(params, wi.astype(np.float32), wo.astype(np.float32)))
+    assert f32.dtype == np.float32
+    # float32 has 24 bits; 1e-4 relative covers exponent amplification (n log cos) in lobes.
+    np.testing.assert_allclose(f32, f64, rtol=1e-4, atol=1e-6 * float(np.max(f64)))
