@@ -104,9 +104,7 @@ class Measurements:
         wo = np.asarray(wo, float)
         values = np.asarray(values, float)
         if wi.ndim != 2 or wi.shape[-1] != 3 or wo.shape != wi.shape:
-            raise MeasurementsError(
-                f"wi and wo must both be (N, 3); got {wi.shape} and {wo.shape}"
-            )
+            raise MeasurementsError(f"wi and wo must both be (N, 3); got {wi.shape} and {wo.shape}")
         if values.shape != wi.shape:
             raise MeasurementsError(f"values must be (N, 3) = {wi.shape}; got {values.shape}")
         n = wi.shape[0]

@@ -51,15 +51,15 @@ def beckmann_d(h: jax.Array, alpha_x: jax.Array, alpha_y: jax.Array) -> jax.Arra
     # Evaluated in log space: the float32 derivative of 1/(ax ay hz^4) underflows to
     # -inf at grazing h and would meet exp(...) = 0 as NaN. The total exponent is
     # floored at -700, where exp underflows (D < 1e-304), so the derivative is 0 there.
-    log_d = -slope_norm2(h, alpha_x, alpha_y) / hz2 - jnp.log(
-        jnp.pi * alpha_x * alpha_y
-    ) - 2.0 * jnp.log(hz2)
+    log_d = (
+        -slope_norm2(h, alpha_x, alpha_y) / hz2
+        - jnp.log(jnp.pi * alpha_x * alpha_y)
+        - 2.0 * jnp.log(hz2)
+    )
     return jnp.exp(jnp.maximum(log_d, -700.0))
 
 
-def projected_roughness2_tan2(
-    v: jax.Array, alpha_x: jax.Array, alpha_y: jax.Array
-) -> jax.Array:
+def projected_roughness2_tan2(v: jax.Array, alpha_x: jax.Array, alpha_y: jax.Array) -> jax.Array:
     """``alpha(phi)^2 tan^2(theta)`` of direction ``v``: ``(ax^2 vx^2 + ay^2 vy^2) / vz^2``."""
     return ((alpha_x * v[:, 0]) ** 2 + (alpha_y * v[:, 1]) ** 2) / v[:, 2] ** 2
 
@@ -92,9 +92,7 @@ def beckmann_lambda_rational(v: jax.Array, alpha_x: jax.Array, alpha_y: jax.Arra
     return jnp.where(a < 1.6, lam, 0.0)
 
 
-def smith_g(
-    lambda_i: jax.Array, lambda_o: jax.Array, *, height_correlated: bool
-) -> jax.Array:
+def smith_g(lambda_i: jax.Array, lambda_o: jax.Array, *, height_correlated: bool) -> jax.Array:
     """Masking-shadowing from Smith Lambdas: ``1/((1+Li)(1+Lo))`` or ``1/(1+Li+Lo)``."""
     if height_correlated:
         return 1.0 / (1.0 + lambda_i + lambda_o)

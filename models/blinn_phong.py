@@ -38,7 +38,9 @@ class BlinnPhong(AbstractModel):
     """Lambert plus a normalised Blinn lobe around the half vector."""
 
     name: ClassVar[str] = "blinn_phong"
-    reference: ClassVar[str] = "Blinn 1977, Models of light reflection for computer synthesized pictures"
+    reference: ClassVar[str] = (
+        "Blinn 1977, Models of light reflection for computer synthesized pictures"
+    )
     energy_conserving: ClassVar[bool] = False
 
     @property

@@ -34,7 +34,15 @@ from brdffit.geometry import ShadingGeometry
 from brdffit.parameters import Parameter, Params
 
 KD = Parameter("kd", (3,), (0.0, 1.0), 0.3, "logit", "diffuse albedo, RGB", linear=True)
-F0 = Parameter("f0", (3,), (0.0, 1.0), 0.04, "logit", "Fresnel reflectance at normal incidence, RGB", linear=True)
+F0 = Parameter(
+    "f0",
+    (3,),
+    (0.0, 1.0),
+    0.04,
+    "logit",
+    "Fresnel reflectance at normal incidence, RGB",
+    linear=True,
+)
 ALPHA = Parameter("alpha", (), (1e-4, 2.0), 0.2, "log", "roughness alpha, unitless")
 ALPHA_X = Parameter("alpha_x", (), (1e-4, 2.0), 0.2, "log", "roughness along the tangent x")
 ALPHA_Y = Parameter("alpha_y", (), (1e-4, 2.0), 0.2, "log", "roughness along the bitangent y")
@@ -60,7 +68,9 @@ class Walter(AbstractModel):
         if self.distribution not in ("ggx", "beckmann"):
             raise ValueError(f"walter: distribution {self.distribution!r} not 'ggx' or 'beckmann'")
         if self.masking not in ("uncorrelated", "height_correlated"):
-            raise ValueError(f"walter: masking {self.masking!r} not 'uncorrelated' or 'height_correlated'")
+            raise ValueError(
+                f"walter: masking {self.masking!r} not 'uncorrelated' or 'height_correlated'"
+            )
         if self.smith not in ("exact", "rational"):
             raise ValueError(f"walter: smith {self.smith!r} not 'exact' or 'rational'")
         if self.smith == "rational" and self.distribution != "beckmann":
@@ -84,7 +94,9 @@ class Walter(AbstractModel):
     def ndf(self, params: Params, h: jax.Array) -> jax.Array:
         """The microfacet distribution D(h) in 1/sr, (N,)."""
         ax, ay = self.roughness(params)
-        return _terms.ggx_d(h, ax, ay) if self.distribution == "ggx" else _terms.beckmann_d(h, ax, ay)
+        return (
+            _terms.ggx_d(h, ax, ay) if self.distribution == "ggx" else _terms.beckmann_d(h, ax, ay)
+        )
 
     def lambda_(self, params: Params, v: jax.Array) -> jax.Array:
         """Smith Lambda of direction ``v`` for the chosen distribution, (N,)."""

@@ -46,6 +46,10 @@ CASES: list[Case] = [
     Case("walter", {"distribution": "beckmann", "smith": "rational"}, {"alpha": 0.3}),
     Case("walter", {"masking": "height_correlated"}, {"alpha": 0.5}),
     Case("walter", {"anisotropic": True}, {"alpha_x": 0.1, "alpha_y": 0.4}),
-    Case("walter", {"anisotropic": True, "distribution": "beckmann"}, {"alpha_x": 0.3, "alpha_y": 0.05}),
+    Case(
+        "walter",
+        {"anisotropic": True, "distribution": "beckmann"},
+        {"alpha_x": 0.3, "alpha_y": 0.05},
+    ),
     Case("walter", {"diffuse": False}, {"alpha": 0.05}),
 ]

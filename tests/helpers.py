@@ -65,6 +65,10 @@ def random_params(model, rng: np.random.Generator) -> dict:
 
     out = {}
     for p in model.parameters:
-        u = rng.uniform(-3.0, 3.0, p.shape) if p.transform != "identity" else rng.uniform(-1, 1, p.shape)
+        u = (
+            rng.uniform(-3.0, 3.0, p.shape)
+            if p.transform != "identity"
+            else rng.uniform(-1, 1, p.shape)
+        )
         out[p.name] = p.to_natural(jnp.asarray(u, float))
     return out

@@ -86,7 +86,9 @@ def test_jit_and_vmap_agree_with_eager(case):
     wi, wo = random_pairs(2, 16)
     eager = model.eval(params, wi, wo)
     jitted = jax.jit(model.eval)(params, wi, wo)
-    one = jax.vmap(lambda a, b: model.eval(params, a[None], b[None])[0])(jnp.asarray(wi), jnp.asarray(wo))
+    one = jax.vmap(lambda a, b: model.eval(params, a[None], b[None])[0])(
+        jnp.asarray(wi), jnp.asarray(wo)
+    )
     np.testing.assert_allclose(np.asarray(jitted), np.asarray(eager), rtol=1e-12)
     np.testing.assert_allclose(np.asarray(one), np.asarray(eager), rtol=1e-12)
 
