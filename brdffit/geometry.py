@@ -19,6 +19,7 @@ MERL tables are isotropic and store ``phi_d`` folded into [0, pi) by the symmetr
 from __future__ import annotations
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float
@@ -79,10 +80,11 @@ def io_to_halfdiff(
     h = wi + wo
     norm = np.linalg.norm(h, axis=-1, keepdims=True)
     h = np.where(norm > 1e-12, h / np.where(norm > 1e-12, norm, 1.0), np.array([0.0, 0.0, 1.0]))
-    theta_h = np.arccos(np.clip(h[..., 2], -1.0, 1.0))
+    # arctan2 rather than arccos keeps full precision near theta = 0 (wi ~ wo).
+    theta_h = np.arctan2(np.hypot(h[..., 0], h[..., 1]), h[..., 2])
     phi_h = np.arctan2(h[..., 1], h[..., 0])
     d = _rot_y(_rot_z(wi, -phi_h), -theta_h)
-    theta_d = np.arccos(np.clip(d[..., 2], -1.0, 1.0))
+    theta_d = np.arctan2(np.hypot(d[..., 0], d[..., 1]), d[..., 2])
     phi_d = np.arctan2(d[..., 1], d[..., 0])
     return theta_h, theta_d, phi_d, phi_h
 
@@ -180,6 +182,7 @@ class ShadingGeometry(eqx.Module):
     above: Bool[Array, " n"]
 
 
+@jax.jit
 def shading_geometry(wi: Float[ArrayLike, "n 3"], wo: Float[ArrayLike, "n 3"]) -> ShadingGeometry:
     """Compute :class:`ShadingGeometry` from unit directions (jittable, any float dtype)."""
     wi = jnp.asarray(wi)

@@ -9,6 +9,10 @@ import jax  # noqa: E402
 jax.config.update("jax_enable_x64", True)
 jax.config.update("jax_numpy_rank_promotion", "raise")
 
+import brdffit  # noqa: E402
+
+brdffit.enable_compilation_cache()
+
 from pathlib import Path  # noqa: E402
 
 import pytest  # noqa: E402
