@@ -9,9 +9,26 @@ measured BRDF values span 1e-4 to 1e4. float32 evaluation still works by passing
 float32 directions.
 """
 
+import os
+
 import jax
 
 jax.config.update("jax_enable_x64", True)
+
+
+def enable_compilation_cache(path: str | None = None) -> None:
+    """Keep XLA executables on disk so later processes skip most compile time.
+
+    ``path`` defaults to ``$BRDFFIT_JAX_CACHE`` or ``~/.cache/brdffit/jax``; setting
+    ``BRDFFIT_JAX_CACHE=off`` disables it. The command line and the tests call this.
+    """
+    path = path or os.environ.get("BRDFFIT_JAX_CACHE", "~/.cache/brdffit/jax")
+    if path.lower() in ("off", "0", "none", ""):
+        return
+    jax.config.update("jax_compilation_cache_dir", os.path.expanduser(path))
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.2)
+    jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
+
 
 from brdffit import models  # noqa: E402
 from brdffit.errors import (  # noqa: E402
@@ -22,9 +39,26 @@ from brdffit.errors import (  # noqa: E402
     MeasurementsError,
     ParameterError,
 )
+from brdffit.fit import fit  # noqa: E402
 from brdffit.measurements import Measurements  # noqa: E402
+from brdffit.merl import read_merl, write_merl  # noqa: E402
+from brdffit.rank import Ranking, rank  # noqa: E402
+from brdffit.result import FitResult, Status  # noqa: E402
+from brdffit.sample import Posterior, sample  # noqa: E402
+from brdffit.synthetic import synthesize  # noqa: E402
 
 __all__ = [
+    "enable_compilation_cache",
+    "FitResult",
+    "Posterior",
+    "Ranking",
+    "Status",
+    "fit",
+    "rank",
+    "read_merl",
+    "sample",
+    "synthesize",
+    "write_merl",
     "BrdffitError",
     "ChainTooShortError",
     "FitError",

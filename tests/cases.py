@@ -1,14 +1,18 @@
 """The one table every generic model test is parametrised over.
 
-Each row is a :class:`Case`: a model name, static options, and a dict of natural
-parameter values (missing names take the model's default). A new model joins every
+Each row is a :class:`Case`: a model name, static options, a dict of natural
+parameter values (missing names take the model's default), and the parameters that
+synthetic data cannot identify, each with the reason. A new model joins every
 generic check (positivity, horizon, reciprocity, rotation invariance, extremes,
-jit/vmap, float32) by adding its rows here.
+jit/vmap, float32, identifiability) by adding its rows: here, or in a file
+``tests/cases_<group>.py`` that defines ``ROWS: list[Case]`` (collected below).
 """
 
 from __future__ import annotations
 
+import importlib
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import jax.numpy as jnp
 
@@ -23,6 +27,7 @@ class Case:
     model: str
     options: dict = field(default_factory=dict)
     params: dict = field(default_factory=dict)
+    not_identifiable: dict = field(default_factory=dict)
 
     @property
     def id(self) -> str:
@@ -53,3 +58,7 @@ CASES: list[Case] = [
     ),
     Case("walter", {"diffuse": False}, {"alpha": 0.05}),
 ]
+
+
+for _path in sorted(Path(__file__).parent.glob("cases_*.py")):
+    CASES += importlib.import_module(f"tests.{_path.stem}").ROWS

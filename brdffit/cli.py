@@ -1,0 +1,255 @@
+"""The ``brdffit`` command line; each subcommand is one library call plus printing.
+
+Bad input (a missing or malformed file, an unknown model, option or metric) prints
+one line on stderr naming the problem and exits with code 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from collections.abc import Sequence
+
+from brdffit.errors import BrdffitError
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message: str) -> None:  # one line, exit 2
+        sys.stderr.write(f"brdffit: {message}\n")
+        raise SystemExit(2)
+
+
+def _option_value(text: str) -> object:
+    low = text.lower()
+    if low in ("true", "false"):
+        return low == "true"
+    for cast in (int, float):
+        try:
+            return cast(text)
+        except ValueError:
+            pass
+    return text
+
+
+def _model(name: str, options: Sequence[str] | None):
+    from brdffit import models
+
+    opts = {}
+    for item in options or ():
+        key, sep, value = item.partition("=")
+        if not sep:
+            raise BrdffitError(f"--option {item!r}: expected KEY=VALUE")
+        opts[key] = _option_value(value)
+    return models.get(name, **opts)
+
+
+def _freeze(items: Sequence[str] | None):
+    if not items:
+        return None
+    out: dict[str, object] = {}
+    names: list[str] = []
+    for item in items:
+        key, sep, value = item.partition("=")
+        if sep:
+            out[key] = [float(v) for v in value.split(",")] if "," in value else float(value)
+        else:
+            names.append(key)
+    if names and out:
+        raise BrdffitError("--freeze: give either NAME or NAME=VALUE for every parameter")
+    return out or names
+
+
+def _load(args):
+    from brdffit.loading import load_measurements
+
+    return load_measurements(args.file, stride=tuple(args.stride))
+
+
+def _write(path: str, text: str) -> None:
+    from brdffit.atomic import write_text
+
+    write_text(path, text)
+
+
+def cmd_models(args) -> None:
+    from brdffit import models
+
+    for name in models.available():
+        print(models.get(name).describe())
+        print()
+
+
+def cmd_info(args) -> None:
+    print(_load(args).summary())
+
+
+def cmd_fit(args) -> None:
+    from brdffit.fit import fit
+
+    r = fit(
+        _model(args.model, args.option),
+        _load(args),
+        args.metric,
+        freeze=_freeze(args.freeze),
+        cut_deg=args.cut,
+        n_restarts=args.restarts,
+        seed=args.seed,
+        throw=False,
+    )
+    print(r.report())
+    if args.json:
+        _write(args.json, r.to_json())
+
+
+def cmd_sample(args) -> None:
+    from brdffit.fit import fit
+    from brdffit.sample import sample
+
+    model, data = _model(args.model, args.option), _load(args)
+    r = fit(model, data, args.metric, freeze=_freeze(args.freeze), cut_deg=args.cut, throw=False)
+    post = sample(
+        model,
+        data,
+        init=r,
+        freeze=_freeze(args.freeze),
+        noise=args.noise,
+        n_steps=args.steps,
+        n_walkers=args.walkers,
+        n_subsample=args.subsample,
+        cut_deg=args.cut,
+        seed=args.seed,
+        progress=not args.no_progress,
+    )
+    print(post.summary())
+    if args.corner:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        from brdffit.atomic import save_figure
+
+        save_figure(post.corner(), args.corner, dpi=80)
+    if args.json:
+        _write(
+            args.json,
+            json.dumps(
+                {
+                    "model": post.model,
+                    "metric": post.metric,
+                    "noise": post.noise,
+                    "labels": list(post.labels),
+                    "quantiles_2.5_50_97.5": {k: v.tolist() for k, v in post.quantiles().items()},
+                    "autocorr_time": post.autocorr_time.tolist(),
+                    "ess": post.ess.tolist(),
+                    "warnings": list(post.warnings),
+                },
+                indent=2,
+            ),
+        )
+
+
+def cmd_rank(args) -> None:
+    from brdffit.fit import fit
+    from brdffit.rank import rank
+
+    data = _load(args)
+    names = [n.strip() for n in args.models.split(",") if n.strip()]
+    models_ = [_model(n, ()) for n in names]  # validate every name before fitting
+    results = [
+        fit(m, data, args.metric, cut_deg=args.cut, seed=args.seed, throw=False) for m in models_
+    ]
+    print(rank(results, by=args.by).table(args.format))
+
+
+def cmd_demo(args) -> None:
+    from brdffit.demo import run_demo
+
+    run_demo(args.out, progress=not args.no_progress)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    from brdffit.metrics import METRICS
+
+    p = _Parser(prog="brdffit", description="Fit analytic BRDF models to measured reflectance.")
+    sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
+
+    def data_args(sp):
+        sp.add_argument("file", help="MERL binary, or NBRDF .json/.h5")
+        sp.add_argument(
+            "--stride",
+            type=int,
+            nargs=3,
+            default=(1, 1, 1),
+            metavar=("TH", "TD", "PD"),
+            help="fit a MERL sub-grid (odd divisors of 90 90 180)",
+        )
+
+    def fit_args(sp, with_model=True):
+        if with_model:
+            sp.add_argument("--model", required=True, help="model name (brdffit models)")
+            sp.add_argument(
+                "--option",
+                action="append",
+                metavar="KEY=VALUE",
+                help="static model option, repeatable",
+            )
+            sp.add_argument("--freeze", action="append", metavar="NAME[=VALUE]")
+        sp.add_argument("--metric", default="low_e2", choices=sorted(METRICS))
+        sp.add_argument("--cut", type=float, default=80.0, help="zenith cut, degrees")
+        sp.add_argument("--seed", type=int, default=0)
+
+    s = sub.add_parser("models", help="list every model with parameters and options")
+    s.set_defaults(func=cmd_models)
+    s = sub.add_parser("info", help="summarise a measurement file")
+    data_args(s)
+    s.set_defaults(func=cmd_info)
+    s = sub.add_parser("fit", help="Levenberg-Marquardt fit of one model")
+    data_args(s)
+    fit_args(s)
+    s.add_argument("--restarts", type=int, default=2)
+    s.add_argument("--json", metavar="OUT", help="write the result as JSON")
+    s.set_defaults(func=cmd_fit)
+    s = sub.add_parser("sample", help="emcee posterior of one model, started at the LM fit")
+    data_args(s)
+    fit_args(s)
+    s.add_argument(
+        "--noise", default="constant", choices=["constant", "multiplicative", "additive"]
+    )
+    s.add_argument("--steps", type=int, default=2000)
+    s.add_argument("--walkers", type=int, default=None)
+    s.add_argument("--subsample", type=int, default=10_000)
+    s.add_argument("--corner", metavar="PNG")
+    s.add_argument("--json", metavar="OUT")
+    s.add_argument("--no-progress", action="store_true")
+    s.set_defaults(func=cmd_sample)
+    s = sub.add_parser("rank", help="fit several models and rank them")
+    data_args(s)
+    fit_args(s, with_model=False)
+    s.add_argument("--models", required=True, help="comma-separated model names")
+    s.add_argument("--by", default="loss", choices=["loss", "aic", "bic"])
+    s.add_argument("--format", default="text", choices=["text", "markdown", "csv"])
+    s.set_defaults(func=cmd_rank)
+    s = sub.add_parser("demo", help="synthetic material -> fits -> ranking -> posterior")
+    s.add_argument("--out", default="demo-out", help="output folder")
+    s.add_argument("--no-progress", action="store_true")
+    s.set_defaults(func=cmd_demo)
+    return p
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``brdffit`` console command; returns the exit code."""
+    args = build_parser().parse_args(argv)
+    from brdffit import enable_compilation_cache
+
+    enable_compilation_cache()
+    try:
+        args.func(args)
+    except (BrdffitError, OSError) as err:
+        text = " ".join(str(err).split())
+        sys.stderr.write(f"brdffit {args.command}: {text}\n")
+        return 2
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

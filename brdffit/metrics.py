@@ -1,0 +1,197 @@
+"""Fitting metrics: residual vectors for Levenberg-Marquardt and the scalar losses reported.
+
+Every metric compares ``f cos(theta_i)`` of model and data, linearly or through
+``ln(1 + x)``, with a per-sample weight (DESIGN.md):
+
+======== ================================================ ===================== ==========
+name     loss                                             weight                source
+======== ================================================ ===================== ==========
+ngan     sqrt(sum w (fm ci - fd ci)^2 / sum w)            w = solid angle       Ngan 2005
+low_e1   sum ((fm - fd) ci)^2 sin(theta_i)                sin(theta_i)          Löw 2012
+low_e2   sum (ln(1 + fm ci) - ln(1 + fd ci))^2 sin(th_i)  sin(theta_i)          Löw 2012
+log1p_l1 mean |ln(1 + fm ci) - ln(1 + fd ci)|             uniform               Sztrajman 2021
+======== ================================================ ===================== ==========
+
+Sums and means run over valid samples and the three RGB channels. Ngan et al. cut
+both angles at 80 degrees; here the cut (``cut_deg``, default 80) applies to every
+metric and is chosen once, when the data are prepared.
+
+Least squares needs ``loss = F(sum r^2)``: for the quadratic metrics ``r`` is the
+weighted difference itself. ``log1p_l1`` is an L1 loss, so LM minimises a smooth
+pseudo-Huber surrogate ``sum 2 delta^2 (sqrt(1 + (e/delta)^2) - 1)`` with
+``delta = 1e-3`` (quadratic below delta, ``2 delta |e|`` above); the reported loss is
+always the exact mean absolute difference.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Float
+
+from brdffit.errors import ParameterError
+from brdffit.geometry import ShadingGeometry, shading_geometry
+from brdffit.measurements import Measurements
+
+L1_DELTA = 1e-3
+
+
+@dataclass(frozen=True)
+class Metric:
+    """A named metric: how ``f cos`` is compared, weighted and turned into a loss.
+
+    Fields: ``name``; ``log1p`` compare ``ln(1 + f cos)`` instead of ``f cos``;
+    ``weighting`` "solid_angle", "sin_theta_i" or "uniform"; ``l1`` absolute instead
+    of squared differences; ``source`` the paper.
+    """
+
+    name: str
+    log1p: bool
+    weighting: Literal["solid_angle", "sin_theta_i", "uniform"]
+    l1: bool
+    source: str
+
+    def sample_weights(self, data: Measurements, keep: np.ndarray) -> np.ndarray:
+        """Per-sample weights of the samples ``keep`` (indices), normalised as the loss needs."""
+        if self.weighting == "solid_angle":
+            w = data.weights[keep]
+            return w / np.sum(w)
+        if self.weighting == "sin_theta_i":
+            return np.sqrt(np.clip(1.0 - data.wi[keep, 2] ** 2, 0.0, None))
+        return np.full(len(keep), 1.0 / (3 * max(len(keep), 1)))
+
+    def loss_from_sum(self, total: Array) -> Array:
+        """The reported loss from the weighted sum of squared (or absolute) differences."""
+        return jnp.sqrt(total) if self.name == "ngan" else total
+
+
+METRICS: dict[str, Metric] = {
+    m.name: m
+    for m in (
+        Metric("ngan", False, "solid_angle", False, "Ngan, Durand, Matusik 2005"),
+        Metric("low_e1", False, "sin_theta_i", False, "Löw et al. 2012, E1"),
+        Metric("low_e2", True, "sin_theta_i", False, "Löw et al. 2012, E2"),
+        Metric("log1p_l1", True, "uniform", True, "Sztrajman et al. 2021"),
+    )
+}
+
+
+def get_metric(name: str) -> Metric:
+    """The metric called ``name``; :class:`ParameterError` listing the known ones otherwise."""
+    if name not in METRICS:
+        raise ParameterError(f"unknown metric {name!r}; known: {', '.join(METRICS)}")
+    return METRICS[name]
+
+
+class Prepared(eqx.Module):
+    """Data-only quantities of one data set for one metric, computed once.
+
+    Fields: ``g`` shading geometry of the kept samples; ``cos_i`` (N,); ``target``
+    (N, 3) the data side ``T(f_data cos_i)``; ``weight`` (N,) the per-sample weight
+    of the metric; ``values`` (N, 3) the data in 1/sr.
+    """
+
+    g: ShadingGeometry
+    cos_i: Float[Array, " n"]
+    target: Float[Array, "n 3"]
+    weight: Float[Array, " n"]
+    values: Float[Array, "n 3"]
+
+    @property
+    def n(self) -> int:
+        """Number of kept samples."""
+        return int(self.cos_i.shape[0])
+
+
+def keep_mask(data: Measurements, cut_deg: float | None) -> np.ndarray:
+    """Valid samples with both zenith angles below ``cut_deg`` (None: no cut)."""
+    keep = data.valid.copy()
+    if cut_deg is not None:
+        c = np.cos(np.deg2rad(cut_deg))
+        keep &= (data.wi[:, 2] > c) & (data.wo[:, 2] > c)
+    return keep
+
+
+def prepare(
+    data: Measurements,
+    metric: Metric,
+    *,
+    cut_deg: float | None = 80.0,
+    keep: np.ndarray | None = None,
+) -> Prepared:
+    """Select the samples a metric sees and precompute everything that depends on data only.
+
+    ``keep`` overrides the selection (a boolean mask or indices into ``data``).
+    Raises :class:`ParameterError` if no sample is left.
+    """
+    if keep is None:
+        keep = keep_mask(data, cut_deg)
+    keep = np.asarray(keep)
+    if keep.dtype == bool:
+        keep = np.flatnonzero(keep)
+    if keep.size == 0:
+        raise ParameterError(
+            f"{data.source}: no valid sample left for the fit (cut at {cut_deg} degrees)"
+        )
+    g = shading_geometry(jnp.asarray(data.wi[keep]), jnp.asarray(data.wo[keep]))
+    values = jnp.asarray(data.values[keep])
+    return Prepared(
+        g=g,
+        cos_i=g.cos_i,
+        target=transform_side(metric, values, g.cos_i),
+        weight=jnp.asarray(metric.sample_weights(data, keep)),
+        values=values,
+    )
+
+
+def prepare_all(
+    data: Measurements, *, cut_deg: float | None = 80.0, keep: np.ndarray | None = None
+) -> dict[str, Prepared]:
+    """:func:`prepare` for every metric, sharing one geometry; name -> Prepared."""
+    first, *rest = METRICS.values()
+    p0 = prepare(data, first, cut_deg=cut_deg, keep=keep)
+    keep = np.flatnonzero(keep_mask(data, cut_deg)) if keep is None else keep
+    out = {first.name: p0}
+    for m in rest:
+        out[m.name] = Prepared(
+            g=p0.g,
+            cos_i=p0.cos_i,
+            target=transform_side(m, p0.values, p0.cos_i),
+            weight=jnp.asarray(m.sample_weights(data, np.asarray(keep))),
+            values=p0.values,
+        )
+    return out
+
+
+def transform_side(metric: Metric, f: Array, cos_i: Array) -> Array:
+    """``f cos_i`` or ``ln(1 + f cos_i)`` (argument floored at -0.999 for noisy data)."""
+    x = f * cos_i[:, None]
+    return jnp.log1p(jnp.maximum(x, -0.999)) if metric.log1p else x
+
+
+def differences(metric: Metric, f_model: Array, prep: Prepared) -> Array:
+    """Unweighted differences ``T(f_model cos) - T(f_data cos)``, (N, 3)."""
+    return transform_side(metric, f_model, prep.cos_i) - prep.target
+
+
+def residuals(metric: Metric, f_model: Array, prep: Prepared) -> Array:
+    """The flat residual vector LM minimises (``0.5 sum r^2``), length 3N."""
+    e = differences(metric, f_model, prep)
+    root_w = jnp.sqrt(prep.weight)[:, None]
+    if metric.l1:
+        # pseudo-Huber written as e * sqrt(2 / (sqrt(1 + x^2) + 1)): smooth at e = 0.
+        x = e / L1_DELTA
+        e = e * jnp.sqrt(2.0 / (jnp.sqrt(1.0 + x * x) + 1.0))
+    return (root_w * e).ravel()
+
+
+def loss(metric: Metric, f_model: Array, prep: Prepared) -> Array:
+    """The exact scalar loss of the metric (see the module table)."""
+    e = differences(metric, f_model, prep)
+    w = prep.weight[:, None]
+    total = jnp.sum(w * jnp.abs(e)) if metric.l1 else jnp.sum(w * e * e)
+    return metric.loss_from_sum(total)

@@ -1,0 +1,236 @@
+"""`FitResult`: what a Levenberg-Marquardt fit found, its report and its JSON form."""
+
+from __future__ import annotations
+
+import enum
+import json
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+
+class Status(enum.Enum):
+    """How a fit ended; each member's value is a readable message."""
+
+    CONVERGED = "converged: step and loss changes below the tolerances"
+    MAX_STEPS = "not converged: stopped at max_steps"
+    NONFINITE = "failed: the loss or the parameters became NaN or Inf"
+    SOLVER_FAILED = "failed: the solver reported an error"
+
+
+def _floats(a: object) -> list[float] | float:
+    arr = np.asarray(a, dtype=float)
+    return float(arr) if arr.ndim == 0 else arr.tolist()
+
+
+@dataclass(frozen=True, eq=False)
+class FitResult:
+    """The outcome of :func:`brdffit.fit`; every field is always present.
+
+    Parameters are in natural units. ``stderr`` and ``covariance`` are ``None`` with
+    ``errors_reason`` saying why when they cannot be computed. ``covariance`` and
+    ``correlation`` are over the free scalars named by ``labels``.
+
+    Fields: ``model`` (registry name), ``options`` (static options), ``metric``,
+    ``params`` / ``init_params`` (name -> array), ``stderr`` (name -> array, frozen
+    parameters 0), ``covariance``, ``correlation``, ``labels``, ``frozen`` (names),
+    ``errors_method`` ("sandwich" or "classic"), ``errors_reason``, ``loss`` (the
+    metric's value), ``losses`` (every metric, same samples), ``cost`` (``0.5 sum r^2``
+    LM minimised), ``n_samples``, ``n_data`` (residuals = 3 x samples), ``n_free``,
+    ``aic``, ``bic``, ``condition_number`` (of the column-scaled ``J^T J``),
+    ``status``, ``n_steps``, ``n_starts``, ``wall_time`` (s), ``cut_deg``, ``source``,
+    ``at_bound`` (names of parameters within 1e-6 of a bound), ``warnings``.
+    """
+
+    model: str
+    options: dict
+    metric: str
+    params: dict[str, np.ndarray]
+    init_params: dict[str, np.ndarray]
+    stderr: dict[str, np.ndarray] | None
+    covariance: np.ndarray | None
+    correlation: np.ndarray | None
+    labels: tuple[str, ...]
+    frozen: tuple[str, ...]
+    errors_method: str
+    errors_reason: str | None
+    loss: float
+    losses: dict[str, float]
+    cost: float
+    n_samples: int
+    n_data: int
+    n_free: int
+    aic: float
+    bic: float
+    condition_number: float
+    status: Status
+    n_steps: int
+    n_starts: int
+    wall_time: float
+    cut_deg: float | None
+    source: str
+    at_bound: tuple[str, ...] = ()
+    warnings: tuple[str, ...] = field(default_factory=tuple)
+
+    @property
+    def converged(self) -> bool:
+        """True only for a finished, finite fit."""
+        return self.status is Status.CONVERGED
+
+    def to_dict(self) -> dict:
+        """JSON-ready dict (arrays as lists of floats)."""
+        return {
+            "model": self.model,
+            "options": {k: v for k, v in self.options.items()},
+            "metric": self.metric,
+            "params": {k: _floats(v) for k, v in self.params.items()},
+            "init_params": {k: _floats(v) for k, v in self.init_params.items()},
+            "stderr": None
+            if self.stderr is None
+            else {k: _floats(v) for k, v in self.stderr.items()},
+            "covariance": None if self.covariance is None else self.covariance.tolist(),
+            "correlation": None if self.correlation is None else self.correlation.tolist(),
+            "labels": list(self.labels),
+            "frozen": list(self.frozen),
+            "errors_method": self.errors_method,
+            "errors_reason": self.errors_reason,
+            "loss": self.loss,
+            "losses": dict(self.losses),
+            "cost": self.cost,
+            "n_samples": self.n_samples,
+            "n_data": self.n_data,
+            "n_free": self.n_free,
+            "aic": self.aic,
+            "bic": self.bic,
+            "condition_number": self.condition_number,
+            "status": self.status.name,
+            "converged": self.converged,
+            "n_steps": self.n_steps,
+            "n_starts": self.n_starts,
+            "wall_time": self.wall_time,
+            "cut_deg": self.cut_deg,
+            "source": self.source,
+            "at_bound": list(self.at_bound),
+            "warnings": list(self.warnings),
+        }
+
+    def to_json(self, indent: int | None = 2) -> str:
+        """The JSON text of :meth:`to_dict` (NaN and Inf written as null)."""
+        return json.dumps(_nan_to_none(self.to_dict()), indent=indent)
+
+    @classmethod
+    def from_dict(cls, d: dict) -> FitResult:
+        """Rebuild a result from :meth:`to_dict` output (e.g. a sweep's JSON file)."""
+
+        def arrays(m: dict | None) -> dict | None:
+            return None if m is None else {k: np.asarray(v, float) for k, v in m.items()}
+
+        def num(x: object) -> float:
+            return float("nan") if x is None else float(x)
+
+        return cls(
+            model=d["model"],
+            options=dict(d.get("options", {})),
+            metric=d["metric"],
+            params=arrays(d["params"]),
+            init_params=arrays(d.get("init_params", {})),
+            stderr=arrays(d.get("stderr")),
+            covariance=None if d.get("covariance") is None else np.asarray(d["covariance"]),
+            correlation=None if d.get("correlation") is None else np.asarray(d["correlation"]),
+            labels=tuple(d.get("labels", ())),
+            frozen=tuple(d.get("frozen", ())),
+            errors_method=d.get("errors_method", "sandwich"),
+            errors_reason=d.get("errors_reason"),
+            loss=num(d["loss"]),
+            losses={k: num(v) for k, v in d.get("losses", {}).items()},
+            cost=num(d.get("cost")),
+            n_samples=int(d.get("n_samples", 0)),
+            n_data=int(d.get("n_data", 0)),
+            n_free=int(d.get("n_free", 0)),
+            aic=num(d.get("aic")),
+            bic=num(d.get("bic")),
+            condition_number=num(d.get("condition_number")),
+            status=Status[d["status"]],
+            n_steps=int(d.get("n_steps", 0)),
+            n_starts=int(d.get("n_starts", 1)),
+            wall_time=num(d.get("wall_time")),
+            cut_deg=d.get("cut_deg"),
+            source=d.get("source", "unknown"),
+            at_bound=tuple(d.get("at_bound", ())),
+            warnings=tuple(d.get("warnings", ())),
+        )
+
+    def report(self, correl_min: float = 0.3) -> str:
+        """Human-readable report in the spirit of lmfit's ``fit_report``."""
+        opts = ", ".join(f"{k}={v!r}" for k, v in self.options.items())
+        cut = "no angle cut" if self.cut_deg is None else f"theta_i, theta_o < {self.cut_deg:g} deg"
+        others = ", ".join(f"{k} {v:.6g}" for k, v in self.losses.items() if k != self.metric)
+        lines = [
+            f"[[Fit]] {self.model}({opts}) on {self.source}",
+            f"    metric           {self.metric} = {self.loss:.6g}   ({cut})",
+            f"    other metrics    {others}",
+            f"    noise model      residuals independent; errors by {self.errors_method}",
+            f"    status           {self.status.value}",
+            f"    steps            {self.n_steps} (best of {self.n_starts} starts)",
+            f"    wall time        {self.wall_time:.3f} s",
+            f"    samples          {self.n_samples} ({self.n_data} residuals), "
+            f"{self.n_free} free parameters",
+            f"    AIC / BIC        {self.aic:.6g} / {self.bic:.6g}   (n = residuals)",
+            f"    cond(J^T J)      {self.condition_number:.3g}",
+            "[[Parameters]]",
+        ]
+        for name, value in self.params.items():
+            flat = np.atleast_1d(value)
+            init = np.atleast_1d(self.init_params.get(name, np.full_like(flat, np.nan)))
+            err = None if self.stderr is None else np.atleast_1d(self.stderr[name])
+            for c in range(flat.size):
+                label = name if flat.size == 1 else f"{name}[{'rgb'[c]}]"
+                v = flat[c]
+                if name in self.frozen:
+                    text = f"{v:.6g} (frozen)"
+                elif err is None:
+                    text = f"{v:.6g} +/- (none)"
+                else:
+                    rel = abs(err[c] / v) * 100 if v != 0 else math.inf
+                    text = f"{v:.6g} +/- {err[c]:.3g} ({rel:.2f}%)"
+                flags = []
+                if name in self.at_bound:
+                    flags.append("at bound")
+                if name not in self.frozen and np.isclose(v, init[c], rtol=1e-9, atol=0):
+                    flags.append("did not move")
+                flag = f"  [{', '.join(flags)}]" if flags else ""
+                lines.append(f"    {label:<14} {text:<36} start {init[c]:.4g}{flag}")
+        if self.errors_reason:
+            lines.append(f"    (no uncertainties: {self.errors_reason})")
+        if self.correlation is not None:
+            pairs = []
+            n = len(self.labels)
+            for i in range(n):
+                for j in range(i + 1, n):
+                    r = self.correlation[i, j]
+                    if abs(r) >= correl_min:
+                        pairs.append(
+                            (abs(r), f"    C({self.labels[i]}, {self.labels[j]}) = {r:+.4f}")
+                        )
+            if pairs:
+                lines.append(f"[[Correlations]] (|C| >= {correl_min})")
+                lines += [p for _, p in sorted(pairs, reverse=True)]
+        for w in self.warnings:
+            lines.append(f"[[Warning]] {w}")
+        return "\n".join(lines)
+
+    def _repr_html_(self) -> str:
+        import html
+
+        return f"<pre>{html.escape(self.report())}</pre>"
+
+
+def _nan_to_none(x: object) -> object:
+    if isinstance(x, float) and not math.isfinite(x):
+        return None
+    if isinstance(x, dict):
+        return {k: _nan_to_none(v) for k, v in x.items()}
+    if isinstance(x, list):
+        return [_nan_to_none(v) for v in x]
+    return x

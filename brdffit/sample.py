@@ -1,0 +1,367 @@
+"""Posterior sampling with emcee's affine-invariant ensemble sampler.
+
+Likelihood: the metric's residual vector ``r`` (:func:`brdffit.metrics.residuals`) on
+a seeded subsample of the valid samples, Gaussian with a free noise scale ``sigma``:
+
+* ``noise="constant"``: ``r_i ~ N(0, sigma^2)``;
+* ``noise="multiplicative"``: ``r_i ~ N(0, (sigma s_i)^2)``, ``s_i = |d r_i / d ln f_i|``,
+  right for log-normal noise on the data (DESIGN.md: heteroscedastic residuals break
+  a constant scale even when the model is right);
+* ``noise="additive"``: the same with ``s_i = |d r_i / d f_i|``, for Gaussian noise
+  of constant size in 1/sr.
+
+``s_i`` is computed once, at the start model (the LM optimum), floored at 1e-3 of
+its median.
+``sigma`` is sampled as ``log_sigma`` with a flat prior on [-30, 10].
+
+Priors come from the parameter bounds: log-uniform for ``log``-transformed
+parameters, uniform otherwise; ``priors`` overrides any of them with a JAX function
+of the natural value returning a log density. The walkers move in the unconstrained
+space of the transforms (the log-Jacobian is added), so bounds are never walls;
+chains are reported in natural units. The log-probability is jitted and vectorised
+over walkers; data-only geometry is computed once.
+
+What the uncertainty means: the spread of parameters compatible with the subsample
+under this noise model. With model error (real materials) neighbouring residuals are
+correlated and the posterior is too narrow; read it as a lower bound.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+import warnings
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+
+import emcee
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from brdffit import metrics as metrics_mod
+from brdffit.abstract_model import AbstractModel
+from brdffit.errors import ChainTooShortError, ParameterError
+from brdffit.fit import Freeze, _freeze_map, _natural, _start_params
+from brdffit.measurements import Measurements
+from brdffit.parameters import Parameter, ParameterLayout
+from brdffit.result import FitResult
+
+NOISE_MODELS = ("constant", "multiplicative", "additive")
+LOG_SIGMA_BOUNDS = (-30.0, 10.0)
+
+
+class ChainTooShortWarning(UserWarning):
+    """The chain is shorter than the asked multiple of its autocorrelation time."""
+
+
+@dataclass(frozen=True, eq=False)
+class Posterior:
+    """Chains and diagnostics from :func:`sample`; every field always present.
+
+    Fields: ``model``, ``options``, ``metric``, ``noise``; ``labels`` of the sampled
+    scalars (free parameters, then ``log_sigma``); ``chain`` (steps, walkers, dim) in
+    natural units; ``log_prob`` (steps, walkers); ``acceptance_fraction`` (walkers,);
+    ``autocorr_time`` (dim,) integrated autocorrelation times in steps, measured after
+    ``burn``; ``burn``; ``n_subsample`` samples the likelihood used; ``stuck_walkers``
+    indices of walkers that barely moved; ``wall_time`` (s); ``warnings``.
+    """
+
+    model: str
+    options: dict
+    metric: str
+    noise: str
+    labels: tuple[str, ...]
+    chain: np.ndarray
+    log_prob: np.ndarray
+    acceptance_fraction: np.ndarray
+    autocorr_time: np.ndarray
+    burn: int
+    n_subsample: int
+    stuck_walkers: tuple[int, ...]
+    wall_time: float
+    warnings: tuple[str, ...]
+
+    @property
+    def n_steps(self) -> int:
+        """Steps per walker, burn-in included."""
+        return int(self.chain.shape[0])
+
+    def samples(self, *, burn: int | None = None, thin: int = 1) -> np.ndarray:
+        """Flat samples (n, dim) after ``burn`` (default: the stored one), every ``thin``-th."""
+        b = self.burn if burn is None else burn
+        return self.chain[b::thin].reshape(-1, self.chain.shape[-1])
+
+    @property
+    def ess(self) -> np.ndarray:
+        """Effective sample size per dimension: walkers x kept steps / autocorrelation time."""
+        kept = (self.n_steps - self.burn) * self.chain.shape[1]
+        return kept / np.maximum(self.autocorr_time, 1.0)
+
+    def split_rhat(self) -> np.ndarray:
+        """Split-R-hat per dimension over walkers (Gelman et al. 2013, BDA3 eq. 11.4)."""
+        x = self.chain[self.burn :]
+        half = x.shape[0] // 2
+        chains = np.concatenate([x[:half], x[half : 2 * half]], axis=1)
+        n = chains.shape[0]
+        means = chains.mean(axis=0)
+        w = chains.var(axis=0, ddof=1).mean(axis=0)
+        b = n * means.var(axis=0, ddof=1)
+        var = (n - 1) / n * w + b / n
+        return np.sqrt(var / np.where(w > 0, w, np.inf))
+
+    def require_converged(self, multiple: float = 50.0) -> np.ndarray:
+        """The autocorrelation times, or :class:`ChainTooShortError` carrying them."""
+        kept = self.n_steps - self.burn
+        if not np.all(np.isfinite(self.autocorr_time)) or kept < multiple * np.max(
+            self.autocorr_time
+        ):
+            raise ChainTooShortError(
+                f"{kept} kept steps < {multiple} x max autocorrelation time "
+                f"{np.max(self.autocorr_time):.1f}; run longer",
+                estimate=self.autocorr_time,
+            )
+        return self.autocorr_time
+
+    def quantiles(self, q: tuple[float, ...] = (0.025, 0.5, 0.975)) -> dict[str, np.ndarray]:
+        """Quantiles of each sampled scalar, label -> array of len(q)."""
+        s = self.samples()
+        return {lab: np.quantile(s[:, i], q) for i, lab in enumerate(self.labels)}
+
+    def summary(self) -> str:
+        """Text table: median and 95% interval, autocorrelation, ESS, R-hat per scalar."""
+        lines = [
+            f"[[Posterior]] {self.model} ({self.metric}, noise {self.noise}), "
+            f"{self.chain.shape[1]} walkers x {self.n_steps} steps, burn {self.burn}, "
+            f"{self.n_subsample} samples in the likelihood",
+            f"    acceptance fraction {np.mean(self.acceptance_fraction):.3f} "
+            f"(min {np.min(self.acceptance_fraction):.3f}); wall time {self.wall_time:.1f} s",
+            f"    {'scalar':<14} {'median':>12} {'2.5%':>12} {'97.5%':>12} "
+            f"{'tau':>8} {'ESS':>8} {'R-hat':>7}",
+        ]
+        rhat = self.split_rhat()
+        for i, (lab, qs) in enumerate(self.quantiles().items()):
+            lines.append(
+                f"    {lab:<14} {qs[1]:>12.6g} {qs[0]:>12.6g} {qs[2]:>12.6g} "
+                f"{self.autocorr_time[i]:>8.1f} {self.ess[i]:>8.0f} {rhat[i]:>7.3f}"
+            )
+        lines += [f"[[Warning]] {w}" for w in self.warnings]
+        return "\n".join(lines)
+
+    def corner(self, truths: Mapping[str, object] | None = None, **kwargs: object):
+        """Corner plot (the ``corner`` package) of the kept samples; returns the figure.
+
+        ``truths`` maps parameter names to values (RGB arrays expand to channels).
+        """
+        import corner
+
+        t = None
+        if truths is not None:
+            flat = {}
+            for name, v in truths.items():
+                v = np.atleast_1d(np.asarray(v, float))
+                keys = [name] if v.size == 1 else [f"{name}[{c}]" for c in "rgb"]
+                flat.update(dict(zip(keys, v, strict=True)))
+            t = [flat.get(lab) for lab in self.labels]
+        kwargs.setdefault("quantiles", [0.025, 0.5, 0.975])
+        kwargs.setdefault("show_titles", True)
+        return corner.corner(self.samples(), labels=list(self.labels), truths=t, **kwargs)
+
+
+def _log_prior_natural(p: Parameter, x: jax.Array) -> jax.Array:
+    lo, hi = p.bounds
+    if p.transform == "log":
+        return -jnp.sum(jnp.log(x))
+    if math.isfinite(lo) and math.isfinite(hi):
+        return jnp.zeros((), x.dtype) - p.size * math.log(hi - lo)
+    return jnp.zeros((), x.dtype)
+
+
+class _Target(eqx.Module):
+    """The jitted log-posterior in unconstrained coordinates (free scalars + log_sigma)."""
+
+    model: AbstractModel = eqx.field(static=True)
+    free: tuple[Parameter, ...] = eqx.field(static=True)
+    metric: metrics_mod.Metric = eqx.field(static=True)
+    priors: tuple = eqx.field(static=True)
+
+    def __call__(self, theta, prep, frozen, scale):
+        u, log_sigma = theta[:-1], theta[-1]
+        lp = jnp.where(
+            (log_sigma > LOG_SIGMA_BOUNDS[0]) & (log_sigma < LOG_SIGMA_BOUNDS[1]), 0.0, -jnp.inf
+        )
+        i = 0
+        for p, prior in zip(self.free, self.priors, strict=True):
+            up = u[i : i + p.size]
+            x = p.to_natural(up)
+            logdet = jnp.sum(jnp.log(jnp.abs(jax.vmap(jax.grad(p.to_natural))(up))))
+            lp = lp + logdet + (prior(x.reshape(p.shape)) if prior else _log_prior_natural(p, x))
+            i += p.size
+        params = _natural(self.free, u, frozen)
+        r = metrics_mod.residuals(self.metric, self.model.evaluate(params, prep.g), prep)
+        sig = jnp.exp(log_sigma) * scale
+        ll = -jnp.sum(jnp.log(sig)) - 0.5 * jnp.sum((r / sig) ** 2)
+        out = lp + ll
+        return jnp.where(jnp.isfinite(out), out, -jnp.inf)
+
+
+@eqx.filter_jit
+def _batched(target, thetas, prep, frozen, scale):
+    return jax.vmap(lambda t: target(t, prep, frozen, scale))(thetas)
+
+
+@eqx.filter_jit
+def _noise_scale(metric, prep, f_model, noise):
+    """``s_i = |d r_i / d ln f|`` or ``|d r_i / d f|`` at the model, floored at 1e-3 x median.
+
+    Taken at the start model (the LM optimum), not at the noisy data: weights that
+    depend on the data's own noise bias the estimate (by about -sigma^2).
+    """
+
+    def r_of(f):
+        return metrics_mod.residuals(metric, f, prep)
+
+    tangent = f_model if noise == "multiplicative" else jnp.ones_like(f_model)
+    s = jnp.abs(jax.jvp(r_of, (f_model,), (tangent,))[1])
+    return jnp.maximum(s, 1e-3 * jnp.median(s))
+
+
+def _start_ball(layout: ParameterLayout, init: object, u0: np.ndarray) -> np.ndarray:
+    """Per-dimension spread of the initial walkers in unconstrained units.
+
+    A tenth of the LM standard errors mapped through the transforms when ``init`` is a
+    :class:`FitResult` with errors, else 1e-4; 1e-2 for ``log_sigma``.
+    """
+    spread = np.full(u0.size, 1e-4)
+    spread[-1] = 1e-2
+    if isinstance(init, FitResult) and init.stderr is not None:
+        i = 0
+        for p in layout.free:
+            x = jnp.asarray(init.params[p.name], jnp.float64).ravel()
+            dudx = jax.vmap(jax.grad(lambda v, p=p: p.to_unconstrained(v)))(x)
+            sd = np.asarray(init.stderr[p.name], float).ravel() * np.abs(np.asarray(dudx))
+            spread[i : i + p.size] = np.where(np.isfinite(sd) & (sd > 0), 0.1 * sd, 1e-4)
+            i += p.size
+    return spread
+
+
+def sample(
+    model: AbstractModel,
+    data: Measurements,
+    *,
+    metric: str | None = None,
+    init: FitResult | Mapping[str, object] | None = None,
+    freeze: Freeze = None,
+    noise: str = "constant",
+    priors: Mapping[str, Callable[[jax.Array], jax.Array]] | None = None,
+    n_walkers: int | None = None,
+    n_steps: int = 2000,
+    burn: int | None = None,
+    n_subsample: int = 10_000,
+    cut_deg: float | None = 80.0,
+    seed: int = 0,
+    progress: bool = True,
+    min_autocorr_multiple: float = 50.0,
+) -> Posterior:
+    """Sample the posterior of ``model``'s parameters given ``data`` with emcee.
+
+    Arguments:
+    - ``model``, ``data``, ``freeze``, ``cut_deg``: as in :func:`brdffit.fit`.
+    - ``metric``: residuals of the likelihood; default the ``init`` fit's, else ``low_e2``.
+    - ``init``: the LM result (or a natural parameter dict) the walkers start around;
+      walkers start in a Gaussian ball a tenth of its standard errors wide.
+    - ``noise``: ``"constant"``, ``"multiplicative"`` or ``"additive"`` (module docstring).
+    - ``priors``: name -> log density of the natural value (JAX function).
+    - ``n_walkers`` (default ``max(32, 4 dim)``), ``n_steps``, ``burn`` (default a third).
+    - ``n_subsample``: samples drawn (seeded) from the valid ones for the likelihood.
+    - ``progress``: tqdm progress bar.
+    - ``min_autocorr_multiple``: warn (:class:`ChainTooShortWarning`) below this many
+      autocorrelation times.
+    """
+    t0 = time.perf_counter()
+    if noise not in NOISE_MODELS:
+        raise ParameterError(f"noise={noise!r}: use one of {NOISE_MODELS}")
+    if isinstance(init, FitResult):
+        metric = metric or init.metric
+        start = _start_params(model, init.params)
+    else:
+        start = _start_params(model, init)
+    m = metrics_mod.get_metric(metric or "low_e2")
+    layout = ParameterLayout.build(model.parameters, _freeze_map(model, freeze, start))
+    unknown = sorted(set(priors or {}) - {p.name for p in layout.free})
+    if unknown:
+        raise ParameterError(f"priors given for {unknown}, which are not free parameters")
+    frozen = {k: jnp.asarray(v, jnp.float64) for k, v in layout.frozen.items()}
+    rng = np.random.default_rng(seed)
+    keep = np.flatnonzero(metrics_mod.keep_mask(data, cut_deg))
+    if keep.size > n_subsample:
+        keep = np.sort(rng.choice(keep, size=n_subsample, replace=False))
+    prep = metrics_mod.prepare(data, m, keep=keep)
+
+    full = {**start, **frozen}
+    f_start = model.evaluate(full, prep.g)
+    if noise == "constant":
+        scale = jnp.ones(3 * prep.n)
+    else:
+        scale = _noise_scale(m, prep, f_start, noise)
+    r0 = metrics_mod.residuals(m, f_start, prep)
+    sigma0 = float(jnp.sqrt(jnp.mean((r0 / scale) ** 2)))
+    u0 = np.concatenate([np.asarray(layout.unconstrained(start)), [math.log(max(sigma0, 1e-12))]])
+    ndim = u0.size
+    n_walkers = n_walkers or max(32, 4 * ndim)
+    p0 = u0 + _start_ball(layout, init, u0) * rng.standard_normal((n_walkers, ndim))
+
+    target = _Target(model, layout.free, m, tuple((priors or {}).get(p.name) for p in layout.free))
+
+    def log_prob(thetas: np.ndarray) -> np.ndarray:
+        return np.asarray(_batched(target, jnp.asarray(thetas), prep, frozen, scale))
+
+    sampler = emcee.EnsembleSampler(n_walkers, ndim, log_prob, vectorize=True)
+    sampler.random_state = np.random.RandomState(int(rng.integers(2**31))).get_state()
+    sampler.run_mcmc(p0, n_steps, progress=progress)
+    chain_u = sampler.get_chain()
+    chain = _to_natural(layout, chain_u)
+    burn = n_steps // 3 if burn is None else burn
+    tau = emcee.autocorr.integrated_time(chain_u[burn:], tol=0)
+    acc = np.asarray(sampler.acceptance_fraction)
+    stuck = tuple(int(i) for i in np.flatnonzero(acc < 0.2 * np.median(acc)))
+    notes = []
+    if n_steps - burn < min_autocorr_multiple * np.max(tau):
+        notes.append(
+            f"chain of {n_steps - burn} kept steps is shorter than {min_autocorr_multiple:g} "
+            f"autocorrelation times (max tau {np.max(tau):.1f}); estimates are unreliable"
+        )
+    if stuck:
+        notes.append(f"{len(stuck)} stuck walkers (acceptance < 0.2 x median): {list(stuck)}")
+    for w in notes:
+        warnings.warn(w, ChainTooShortWarning if "shorter" in w else UserWarning, stacklevel=2)
+    labels = tuple(layout.labels()) + ("log_sigma",)
+    return Posterior(
+        model=model.name,
+        options=model.options(),
+        metric=m.name,
+        noise=noise,
+        labels=labels,
+        chain=chain,
+        log_prob=np.asarray(sampler.get_log_prob()),
+        acceptance_fraction=acc,
+        autocorr_time=np.asarray(tau),
+        burn=burn,
+        n_subsample=prep.n,
+        stuck_walkers=stuck,
+        wall_time=time.perf_counter() - t0,
+        warnings=tuple(notes),
+    )
+
+
+def _to_natural(layout: ParameterLayout, chain_u: np.ndarray) -> np.ndarray:
+    """Map a chain (steps, walkers, free + 1) from unconstrained to natural units."""
+    out = np.array(chain_u, copy=True)
+    i = 0
+    for p in layout.free:
+        out[..., i : i + p.size] = np.asarray(
+            p.to_natural(jnp.asarray(chain_u[..., i : i + p.size]))
+        )
+        i += p.size
+    return out

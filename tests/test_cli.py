@@ -1,0 +1,96 @@
+"""The command line: every subcommand once, and bad input as one stderr line with exit 2."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from brdffit import models, synthesize, write_merl
+from brdffit.cli import main
+
+TRUTH = {"kd": [0.1, 0.2, 0.3], "f0": [0.9, 0.6, 0.3], "alpha": 0.15}
+SMALL = ["--stride", "9", "9", "9"]
+
+
+@pytest.fixture(scope="module")
+def merl_file(tmp_path_factory):
+    path = tmp_path_factory.mktemp("cli") / "ggx.binary"
+    write_merl(path, synthesize(models.get("walter"), TRUTH, noise_mult=0.03, seed=5))
+    return path
+
+
+def _run(capsys, *argv):
+    code = main([str(a) for a in argv])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def test_models_lists_every_model_with_parameters(capsys):
+    code, out, _ = _run(capsys, "models")
+    assert code == 0
+    for name in models.available():
+        assert name in out
+    assert "alpha" in out and "options:" in out
+
+
+def test_info_and_fit_with_json(capsys, merl_file, tmp_path):
+    code, out, _ = _run(capsys, "info", merl_file)
+    assert code == 0 and "1458000" in out
+    js = tmp_path / "fit.json"
+    code, out, _ = _run(capsys, "fit", merl_file, "--model", "walter", "--json", js, *SMALL)
+    assert code == 0 and "[[Parameters]]" in out and "low_e2" in out
+    d = json.loads(js.read_text())
+    assert {"model", "metric", "params", "stderr", "loss", "converged"} <= set(d)
+    assert d["converged"] and np.allclose(d["params"]["alpha"], 0.15, rtol=0.02)
+
+
+def test_fit_with_options_and_freeze(capsys, merl_file):
+    code, out, _ = _run(
+        capsys,
+        "fit",
+        merl_file,
+        "--model",
+        "walter",
+        "--option",
+        "distribution=beckmann",
+        "--freeze",
+        "alpha=0.2",
+        "--metric",
+        "ngan",
+        *SMALL,
+    )
+    assert code == 0 and "distribution='beckmann'" in out and "(frozen)" in out
+
+
+def test_rank(capsys, merl_file):
+    code, out, _ = _run(
+        capsys, "rank", merl_file, "--models", "lambert,walter", "--format", "markdown", *SMALL
+    )
+    assert code == 0
+    assert out.index("| 1 | walter") < out.index("| 2 | lambert")
+
+
+@pytest.mark.parametrize(
+    ("argv", "needle"),
+    [
+        (["info", "missing.binary"], "missing.binary"),
+        (["fit", "{bad}", "--model", "walter"], "header"),
+        (["fit", "{good}", "--model", "nope"], "unknown model 'nope'"),
+        (["fit", "{good}", "--model", "walter", "--option", "colour=red"], "no option"),
+        (["fit", "{good}", "--model", "walter", "--metric", "l2"], "invalid choice"),
+        (["fit", "{good}", "--model", "walter", "--freeze", "beta=1"], "cannot freeze"),
+        (["rank", "{good}", "--models", "walter,nope"], "unknown model 'nope'"),
+        (["fit", "{good}", "--model", "walter", "--stride", "2", "2", "2"], "stride"),
+    ],
+)
+def test_bad_input_is_one_line_and_exit_2(capsys, merl_file, tmp_path, argv, needle):
+    bad = tmp_path / "bad.binary"
+    bad.write_bytes(b"\x00" * 64)
+    argv = [a.replace("{bad}", str(bad)).replace("{good}", str(merl_file)) for a in argv]
+    with pytest.raises(SystemExit) as exit_info:
+        raise SystemExit(main(argv))
+    out, err = capsys.readouterr()
+    assert exit_info.value.code == 2
+    assert len(err.strip().splitlines()) == 1 and needle in err, err

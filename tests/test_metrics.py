@@ -1,0 +1,83 @@
+"""Metrics against a direct numpy transcription of DESIGN.md's formulas."""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from brdffit import metrics
+from brdffit.measurements import Measurements
+from tests.helpers import random_pairs
+
+
+def _data(seed: int = 0, n: int = 400) -> tuple[Measurements, np.ndarray]:
+    wi, wo = random_pairs(seed, n)
+    rng = np.random.default_rng(seed)
+    fd = rng.uniform(0.01, 5.0, (n, 3))
+    fm = fd * rng.uniform(0.5, 1.5, (n, 3))
+    w = rng.uniform(0.5, 2.0, n)
+    return Measurements.from_directions(wi, wo, fd, weights=w), fm
+
+
+def _reference(name: str, data: Measurements, fm: np.ndarray, cut_deg: float) -> float:
+    c = np.cos(np.deg2rad(cut_deg))
+    k = data.valid & (data.wi[:, 2] > c) & (data.wo[:, 2] > c)
+    ci = data.wi[k, 2][:, None]
+    si = np.sqrt(1 - data.wi[k, 2] ** 2)[:, None]
+    fd, fm = data.values[k], fm[k]
+    if name == "ngan":
+        w = data.weights[k][:, None]
+        return float(np.sqrt(np.sum(w * (fm * ci - fd * ci) ** 2) / np.sum(w[:, 0])))
+    if name == "low_e1":
+        return float(np.sum(((fm - fd) * ci) ** 2 * si))
+    if name == "low_e2":
+        return float(np.sum((np.log1p(fm * ci) - np.log1p(fd * ci)) ** 2 * si))
+    return float(np.mean(np.abs(np.log1p(fm * ci) - np.log1p(fd * ci))))
+
+
+@pytest.mark.parametrize("name", sorted(metrics.METRICS))
+@pytest.mark.parametrize("cut", [80.0, 60.0])
+def test_loss_matches_design_formula(name, cut):
+    data, fm = _data()
+    m = metrics.get_metric(name)
+    prep = metrics.prepare(data, m, cut_deg=cut)
+    keep = metrics.keep_mask(data, cut)
+    got = float(metrics.loss(m, jnp.asarray(fm[keep]), prep))
+    # Same float64 sums in another order: 1e-12 relative.
+    np.testing.assert_allclose(got, _reference(name, data, fm, cut), rtol=1e-12)
+
+
+@pytest.mark.parametrize("name", ["ngan", "low_e1", "low_e2"])
+def test_quadratic_metrics_loss_is_sum_of_squared_residuals(name):
+    data, fm = _data(1)
+    m = metrics.get_metric(name)
+    prep = metrics.prepare(data, m)
+    keep = metrics.keep_mask(data, 80.0)
+    r = metrics.residuals(m, jnp.asarray(fm[keep]), prep)
+    total = float(jnp.sum(r * r))
+    expect = total**0.5 if name == "ngan" else total
+    np.testing.assert_allclose(
+        float(metrics.loss(m, jnp.asarray(fm[keep]), prep)), expect, rtol=1e-12
+    )
+
+
+def test_l1_surrogate_is_quadratic_near_zero_and_linear_far():
+    data, _ = _data(2, 50)
+    m = metrics.get_metric("log1p_l1")
+    prep = metrics.prepare(data, m, cut_deg=None)
+    w = float(prep.weight[0])
+    for e, expect in [(1e-6, 1e-12), (1.0, 2 * metrics.L1_DELTA * 1.0)]:
+        # f such that log1p(f cos) - target = e exactly for every sample and channel.
+        f = (jnp.expm1(prep.target + e)) / prep.cos_i[:, None]
+        r = metrics.residuals(m, f, prep)
+        # r^2 / w is 2 delta^2 (sqrt(1 + (e/delta)^2) - 1): e^2 for small e, ~2 delta |e| for large.
+        np.testing.assert_allclose(float(r[0] ** 2 / w), expect, rtol=2e-3)
+
+
+def test_unknown_metric_and_empty_selection_raise():
+    data, _ = _data()
+    with pytest.raises(metrics.ParameterError, match="unknown metric 'nope'"):
+        metrics.get_metric("nope")
+    with pytest.raises(metrics.ParameterError, match="no valid sample"):
+        metrics.prepare(data, metrics.get_metric("ngan"), cut_deg=0.0)

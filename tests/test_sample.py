@@ -1,0 +1,107 @@
+"""emcee posteriors: coverage of the truth over seeds, diagnostics, warnings, plots."""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pytest
+
+from brdffit import ChainTooShortError, fit, models, sample, synthesize
+from brdffit.errors import ParameterError
+from brdffit.sample import ChainTooShortWarning
+
+TRUTH = {"kd": [0.1, 0.2, 0.3], "f0": [0.9, 0.6, 0.3], "alpha": 0.15}
+
+
+def _flat_truth(labels):
+    flat = {}
+    for k, v in TRUTH.items():
+        v = np.atleast_1d(v)
+        flat.update(
+            {k: v[0]} if v.size == 1 else {f"{k}[{c}]": x for c, x in zip("rgb", v, strict=True)}
+        )
+    return np.array([flat[lab] for lab in labels if lab != "log_sigma"])
+
+
+def _run(seed: int, n_steps: int = 900):
+    m = models.get("walter")
+    # The same MERL sub-grid for every seed (only the noise changes): one compile.
+    data = synthesize(m, TRUTH, stride=(9, 9, 9), noise_mult=0.05, seed=seed)
+    r = fit(m, data, "low_e2", n_restarts=0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ChainTooShortWarning)
+        return sample(
+            m,
+            data,
+            init=r,
+            noise="multiplicative",
+            n_steps=n_steps,
+            burn=300,
+            seed=seed,
+            progress=False,
+        )
+
+
+def test_95_percent_intervals_cover_the_truth_in_most_seeds():
+    hits, total = 0, 0
+    for seed in range(4):
+        post = _run(seed)
+        q = post.quantiles()
+        lo = np.array([q[lab][0] for lab in post.labels[:-1]])
+        hi = np.array([q[lab][2] for lab in post.labels[:-1]])
+        t = _flat_truth(post.labels)
+        covered = (lo <= t) & (t <= hi)
+        print(
+            f"seed {seed}: {covered.sum()}/{covered.size} covered; "
+            f"sigma {np.exp(q['log_sigma'][1]):.4f} (true 0.05)"
+        )
+        hits += int(covered.sum())
+        total += covered.size
+        # The noise scale itself is recovered: 5% log-normal noise.
+        assert abs(np.exp(q["log_sigma"][1]) - 0.05) < 0.005
+    # Nominal 95%: 26.6 of 28 expected; fewer than 22 has probability < 1e-3 for
+    # independent intervals (binomial), even allowing for short-chain quantile noise.
+    assert hits >= 22, (hits, total)
+
+
+def test_diagnostics_shapes_and_short_chain_warning():
+    m = models.get("lambert")
+    data = synthesize(m, {"kd": [0.2, 0.4, 0.6]}, grid="random", n=500, noise_mult=0.05)
+    with pytest.warns(ChainTooShortWarning, match="autocorrelation"):
+        post = sample(
+            m,
+            data,
+            n_steps=60,
+            n_walkers=16,
+            progress=False,
+            init={"kd": [0.2, 0.4, 0.6]},
+            noise="multiplicative",
+        )
+    assert post.chain.shape == (60, 16, 4) and post.log_prob.shape == (60, 16)
+    assert post.labels == ("kd[r]", "kd[g]", "kd[b]", "log_sigma")
+    assert post.acceptance_fraction.shape == (16,) and np.all(post.ess > 0)
+    assert post.split_rhat().shape == (4,)
+    assert post.warnings and "Posterior" in post.summary()
+    with pytest.raises(ChainTooShortError) as err:
+        post.require_converged()
+    assert err.value.estimate.shape == (4,)
+    # Natural units inside the bounds, whatever the walkers did in unconstrained space.
+    assert np.all((post.chain[..., :3] > 0) & (post.chain[..., :3] < 1))
+
+
+def test_corner_plot_and_bad_arguments():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    m = models.get("lambert")
+    data = synthesize(m, {"kd": 0.3}, grid="random", n=300, noise_mult=0.05)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ChainTooShortWarning)
+        post = sample(m, data, n_steps=40, n_walkers=12, progress=False)
+        fig = post.corner(truths={"kd": [0.3, 0.3, 0.3]})
+    assert len(fig.axes) == 16
+    with pytest.raises(ParameterError, match="noise='weird'"):
+        sample(m, data, noise="weird")
+    with pytest.raises(ParameterError, match="not free parameters"):
+        sample(m, data, priors={"alpha": lambda x: 0.0})
