@@ -97,3 +97,78 @@ def smith_g(lambda_i: jax.Array, lambda_o: jax.Array, *, height_correlated: bool
     if height_correlated:
         return 1.0 / (1.0 + lambda_i + lambda_o)
     return 1.0 / ((1.0 + lambda_i) * (1.0 + lambda_o))
+
+
+def fresnel_dielectric(cos: jax.Array, eta: jax.Array) -> jax.Array:
+    """Exact unpolarised Fresnel reflectance of a dielectric interface (Cook & Torrance 1982).
+
+    ``F = 1/2 ((g - c)/(g + c))^2 (1 + ((c (g + c) - 1)/(c (g - c) + 1))^2)`` with
+    ``c = cos`` (incidence cosine on the facet, in [0, 1]), ``g^2 = eta^2 - 1 + c^2`` and
+    ``eta`` the relative index of refraction (inside over outside). Arrays broadcast
+    elementwise. ``g - c`` is written ``(eta^2 - 1)/(g + c)`` so that it keeps its precision
+    for ``eta`` near 1. ``g^2 <= 0`` (total internal reflection, possible only for
+    ``eta < 1``) gives 1; ``g`` is sanitised first so the discarded branch stays finite.
+    """
+    g2 = eta**2 - 1.0 + cos**2
+    tir = g2 <= 0.0
+    g = jnp.sqrt(jnp.where(tir, 1.0, g2))
+    g_plus = jnp.maximum(g + cos, 1e-30)
+    g_minus = (eta**2 - 1.0) / g_plus
+    r = 0.5 * (g_minus / g_plus) ** 2 * (1.0 + ((cos * g_plus - 1.0) / (cos * g_minus + 1.0)) ** 2)
+    return jnp.where(tir, 1.0, r)
+
+
+def fresnel_conductor(cos: jax.Array, eta: jax.Array, k: jax.Array) -> jax.Array:
+    """Exact unpolarised Fresnel reflectance of a conductor with complex index ``eta + i k``.
+
+    With ``c = cos``, ``s2 = 1 - c^2`` and ``a + i b = sqrt(eta^2 - k^2 - s2 + 2 i eta k)``
+    (so ``a^2 + b^2 = sqrt((eta^2 - k^2 - s2)^2 + 4 eta^2 k^2)``):
+    ``Rs = ((a - c)^2 + b^2) / ((a + c)^2 + b^2)``,
+    ``Rp = Rs ((a c - s2)^2 + c^2 b^2) / ((a c + s2)^2 + c^2 b^2)``, ``F = (Rs + Rp) / 2``
+    (the form of pbrt and Mitsuba, written as sums of squares so that F >= 0 exactly).
+    ``a^2`` and ``b^2`` are taken each from the cancellation-free side (``a^2 b^2 =
+    eta^2 k^2``). Arrays broadcast elementwise (e.g. ``cos[:, None]`` with RGB ``eta[None]``).
+    At normal incidence ``F = ((eta - 1)^2 + k^2) / ((eta + 1)^2 + k^2)``.
+    """
+    s2 = 1.0 - cos**2
+    t0 = eta**2 - k**2 - s2
+    ek2 = (eta * k) ** 2
+    norm = jnp.sqrt(t0**2 + 4.0 * ek2)
+    pos = t0 >= 0.0
+    big = jnp.maximum(norm + jnp.abs(t0), 1e-30)  # the side without cancellation
+    a2 = jnp.where(pos, 0.5 * big, 2.0 * ek2 / big)
+    b2 = jnp.where(pos, 2.0 * ek2 / big, 0.5 * big)
+    a = jnp.sqrt(jnp.maximum(a2, 1e-30))
+    rs = ((a - cos) ** 2 + b2) / ((a + cos) ** 2 + b2)
+    cb2 = cos**2 * b2
+    rp = rs * ((a * cos - s2) ** 2 + cb2) / ((a * cos + s2) ** 2 + cb2)
+    return 0.5 * (rs + rp)
+
+
+def v_cavity_g(cos_h: jax.Array, cos_i: jax.Array, cos_o: jax.Array, cos_d: jax.Array) -> jax.Array:
+    """Torrance-Sparrow V-cavity masking-shadowing (Cook and Torrance 1982), (N,).
+
+    ``G = min(1, 2 cos_h cos_i / cos_d, 2 cos_h cos_o / cos_d)`` with ``cos_d = wi.h = wo.h``.
+    ``cos_d`` is floored at 1e-30 before the division; it is > 0 for every reflection pair
+    above the horizon, and where it is tiny the ratio is huge and the ``min`` returns 1.
+    """
+    ratio = 2.0 * cos_h * jnp.minimum(cos_i, cos_o) / jnp.maximum(cos_d, 1e-30)
+    return jnp.minimum(1.0, ratio)
+
+
+def log_cos_theta_h(h: jax.Array) -> jax.Array:
+    """``log(h.z)`` of unit half vectors ``h`` (N, 3), accurate for ``h`` near the normal.
+
+    Lobes ``cos_h^n`` with ``n`` up to 1e5 need ``log cos_h`` to relative precision where
+    ``cos_h`` rounds to 1: there it is ``log1p(-(hx^2 + hy^2)) / 2`` from the tangential
+    components; elsewhere (``hx^2 + hy^2 >= 1/2``) ``log(hz)``, with ``hz`` floored at
+    1e-30 (it is > 0 for every reflection pair above the horizon). Both branches are
+    sanitised before the ``where``, so values and gradients are finite everywhere.
+    """
+    s2 = h[:, 0] ** 2 + h[:, 1] ** 2
+    near = s2 < 0.5
+    return jnp.where(
+        near,
+        0.5 * jnp.log1p(-jnp.where(near, s2, 0.0)),
+        jnp.log(jnp.maximum(h[:, 2], 1e-30)),
+    )
