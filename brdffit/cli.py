@@ -7,7 +7,6 @@ one line on stderr naming the problem and exits with code 2.
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from collections.abc import Sequence
 
@@ -130,22 +129,7 @@ def cmd_sample(args) -> None:
 
         save_figure(post.corner(), args.corner, dpi=80)
     if args.json:
-        _write(
-            args.json,
-            json.dumps(
-                {
-                    "model": post.model,
-                    "metric": post.metric,
-                    "noise": post.noise,
-                    "labels": list(post.labels),
-                    "quantiles_2.5_50_97.5": {k: v.tolist() for k, v in post.quantiles().items()},
-                    "autocorr_time": post.autocorr_time.tolist(),
-                    "ess": post.ess.tolist(),
-                    "warnings": list(post.warnings),
-                },
-                indent=2,
-            ),
-        )
+        _write(args.json, post.to_json())
 
 
 def cmd_rank(args) -> None:

@@ -14,8 +14,6 @@ import time
 import warnings
 from pathlib import Path
 
-import numpy as np
-
 from brdffit import models
 from brdffit.atomic import save_figure, write_text
 from brdffit.fit import fit
@@ -93,25 +91,7 @@ def run_demo(
         )
     log(post.summary())
     files["posterior"] = out / "posterior.json"
-    write_text(
-        files["posterior"],
-        json.dumps(
-            {
-                "model": post.model,
-                "metric": post.metric,
-                "noise": post.noise,
-                "labels": list(post.labels),
-                "quantiles_2.5_50_97.5": {k: v.tolist() for k, v in post.quantiles().items()},
-                "autocorr_time": post.autocorr_time.tolist(),
-                "ess": post.ess.tolist(),
-                "split_rhat": post.split_rhat().tolist(),
-                "acceptance_fraction": float(np.mean(post.acceptance_fraction)),
-                "warnings": list(post.warnings),
-                "truth": TRUTH,
-            },
-            indent=2,
-        ),
-    )
+    write_text(files["posterior"], json.dumps({**post.to_dict(), "truth": TRUTH}, indent=2))
 
     import matplotlib
 

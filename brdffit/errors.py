@@ -1,4 +1,4 @@
-"""Typed exceptions. Each message names the file or parameter, the bad value and what is accepted."""
+"""Typed exceptions; each message names the file or parameter, the bad value, what is accepted."""
 
 from __future__ import annotations
 

@@ -18,7 +18,8 @@ from brdffit.errors import MeasurementsError
 from brdffit.geometry import above_horizon, fold_phi_d, io_to_halfdiff
 
 
-def _frozen(a: np.ndarray) -> np.ndarray:
+def readonly(a: np.ndarray) -> np.ndarray:
+    """A C-contiguous, read-only view or copy of ``a``."""
     a = np.ascontiguousarray(a)
     a.setflags(write=False)
     return a
@@ -76,7 +77,7 @@ class Measurements:
                     f"(N = {n} samples from wi)"
                 )
             dtype = bool if name == "valid" else np.float64
-            object.__setattr__(self, name, _frozen(arr.astype(dtype, copy=False)))
+            object.__setattr__(self, name, readonly(arr.astype(dtype, copy=False)))
         if self.grid is not None and int(np.prod(self.grid)) != n:
             raise MeasurementsError(f"Measurements.grid {self.grid} does not hold N = {n} samples")
 

@@ -38,7 +38,7 @@ from brdffit.geometry import (
     merl_indices,
     merl_solid_angle_weights,
 )
-from brdffit.measurements import Measurements
+from brdffit.measurements import Measurements, readonly
 
 MERL_SCALES: np.ndarray = np.array([1.0 / 1500.0, 1.15 / 1500.0, 1.66 / 1500.0])
 """RGB scales of the MERL format: physical value (1/sr) = raw x scale."""
@@ -53,12 +53,6 @@ MERL_FILE_BYTES: int = 12 + 3 * MERL_N_CELLS * 8
 _HEADER_DTYPE = np.dtype("<i4")
 _BODY_DTYPE = np.dtype("<f8")
 _CHANNELS = "RGB"
-
-
-def _readonly(a: np.ndarray) -> np.ndarray:
-    a = np.ascontiguousarray(a)
-    a.setflags(write=False)
-    return a
 
 
 # --------------------------------------------------------------------------- grid geometry
@@ -145,14 +139,14 @@ def _merl_grid_cached(stride: tuple[int, int, int]) -> MerlGrid:
     return MerlGrid(
         stride=stride,
         shape=shape,
-        index=_readonly(index.ravel()),
-        theta_h=_readonly(th.ravel()),
-        theta_d=_readonly(td.ravel()),
-        phi_d=_readonly(pd.ravel()),
-        wi=_readonly(wi),
-        wo=_readonly(wo),
-        weights=_readonly(weights.ravel()),
-        above=_readonly(above_horizon(wi, wo)),
+        index=readonly(index.ravel()),
+        theta_h=readonly(th.ravel()),
+        theta_d=readonly(td.ravel()),
+        phi_d=readonly(pd.ravel()),
+        wi=readonly(wi),
+        wo=readonly(wo),
+        weights=readonly(weights.ravel()),
+        above=readonly(above_horizon(wi, wo)),
     )
 
 

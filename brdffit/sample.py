@@ -149,6 +149,34 @@ class Posterior:
         lines += [f"[[Warning]] {w}" for w in self.warnings]
         return "\n".join(lines)
 
+    def to_dict(self) -> dict:
+        """JSON-ready summary (not the chain): quantiles, diagnostics, warnings."""
+        return {
+            "model": self.model,
+            "options": dict(self.options),
+            "metric": self.metric,
+            "noise": self.noise,
+            "labels": list(self.labels),
+            "n_walkers": int(self.chain.shape[1]),
+            "n_steps": self.n_steps,
+            "burn": self.burn,
+            "n_subsample": self.n_subsample,
+            "quantiles_2.5_50_97.5": {k: v.tolist() for k, v in self.quantiles().items()},
+            "autocorr_time": self.autocorr_time.tolist(),
+            "ess": self.ess.tolist(),
+            "split_rhat": self.split_rhat().tolist(),
+            "acceptance_fraction": float(np.mean(self.acceptance_fraction)),
+            "stuck_walkers": list(self.stuck_walkers),
+            "wall_time": self.wall_time,
+            "warnings": list(self.warnings),
+        }
+
+    def to_json(self, indent: int | None = 2) -> str:
+        """The JSON text of :meth:`to_dict`."""
+        import json
+
+        return json.dumps(self.to_dict(), indent=indent)
+
     def corner(self, truths: Mapping[str, object] | None = None, **kwargs: object):
         """Corner plot (the ``corner`` package) of the kept samples; returns the figure.
 
