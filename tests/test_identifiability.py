@@ -3,6 +3,7 @@
 Parameters a row declares ``not_identifiable`` (with the reason) are frozen at the
 truth; every other parameter must come back from the defaults (plus two seeded
 restarts) to 1e-3 relative. The directions are the same for every row (one geometry).
+Rows after the first of each model are marked ``slow`` (``python3 -m pytest -m slow``).
 """
 
 from __future__ import annotations
@@ -17,8 +18,17 @@ from tests.helpers import random_pairs
 
 WI, WO = random_pairs(7, 1500)
 
+_FIRST: set[str] = set()
 
-@pytest.mark.parametrize("case", CASES, ids=[c.id for c in CASES])
+
+def _param(case):
+    """The first row of each model runs in the default suite; further option rows are slow."""
+    first = case.model not in _FIRST
+    _FIRST.add(case.model)
+    return pytest.param(case, id=case.id, marks=() if first else pytest.mark.slow)
+
+
+@pytest.mark.parametrize("case", [_param(c) for c in CASES])
 def test_model_recovers_its_own_parameters(case):
     model, truth = case.build()
     f = np.asarray(model.eval(truth, WI, WO))
