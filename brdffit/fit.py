@@ -27,6 +27,7 @@ from collections.abc import Mapping, Sequence
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import lineax as lx
 import numpy as np
 import optimistix as optx
 
@@ -220,7 +221,10 @@ def fit(
     frozen = {k: jnp.asarray(v, jnp.float64) for k, v in layout.frozen.items()}
     preps = metrics_mod.prepare_all(data, cut_deg=cut_deg)
     prep = preps[m.name]
-    solver = optx.LevenbergMarquardt(rtol=rtol, atol=atol)
+    # Normal equations (Cholesky of J^T J + lambda I, p x p) instead of the default QR
+    # of the tall (3N + p) x p damped system: same steps, 4x less linear algebra per
+    # step on MERL-size data. The damping keeps the system positive definite.
+    solver = optx.LevenbergMarquardt(rtol=rtol, atol=atol, linear_solver=lx.Normal(lx.Cholesky()))
     rng = np.random.default_rng(seed)
 
     best = None
