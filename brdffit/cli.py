@@ -145,6 +145,40 @@ def cmd_rank(args) -> None:
     print(rank(results, by=args.by).table(args.format))
 
 
+def cmd_sweep(args) -> None:
+    from brdffit import sweep
+
+    names = [n.strip() for n in (args.materials or "").split(",") if n.strip()] or None
+    if args.merl_dir:
+        materials = sweep.merl_materials(args.merl_dir, names)
+    elif args.nbrdf_dir:
+        materials = sweep.nbrdf_materials(args.nbrdf_dir, names)
+    else:
+        materials = sweep.synthetic_materials(args.synthetic, seed=args.seed)
+    s = sweep.run_sweep(
+        args.out,
+        materials,
+        [n.strip() for n in args.models.split(",") if n.strip()],
+        [n.strip() for n in args.metrics.split(",") if n.strip()],
+        stride=tuple(args.stride),
+        cut_deg=args.cut,
+        n_restarts=args.restarts,
+        seed=args.seed,
+        jobs=args.jobs,
+        progress=not args.no_progress,
+    )
+    print(
+        f"{s.out}: {s.n_tasks} tasks, {s.n_skipped} already done, {s.n_done} fitted now "
+        f"({s.n_unconverged} not converged), {s.n_errors} errors, {s.wall_time:.1f} s"
+    )
+
+
+def cmd_report(args) -> None:
+    from brdffit.report import write_report
+
+    print(write_report(args.sweep_dir))
+
+
 def cmd_demo(args) -> None:
     from brdffit.demo import run_demo
 
@@ -213,6 +247,32 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--by", default="loss", choices=["loss", "aic", "bic"])
     s.add_argument("--format", default="text", choices=["text", "markdown", "csv"])
     s.set_defaults(func=cmd_rank)
+    s = sub.add_parser("sweep", help="fit materials x models x metrics, resumable")
+    s.add_argument("out", help="sweep folder (created; an existing one is resumed)")
+    src = s.add_mutually_exclusive_group(required=True)
+    src.add_argument("--merl-dir", metavar="DIR", help="folder of MERL *.binary files")
+    src.add_argument("--nbrdf-dir", metavar="DIR", help="folder of NBRDF *.json + *.h5")
+    src.add_argument("--synthetic", type=int, metavar="N", help="N seeded synthetic materials")
+    s.add_argument("--materials", help="comma-separated material names to pick")
+    s.add_argument("--models", required=True, help="comma-separated model names")
+    s.add_argument("--metrics", default="low_e2", help="comma-separated metric names")
+    s.add_argument(
+        "--stride",
+        type=int,
+        nargs=3,
+        default=(1, 1, 1),
+        metavar=("TH", "TD", "PD"),
+        help="fit a MERL sub-grid (odd divisors of 90 90 180)",
+    )
+    s.add_argument("--cut", type=float, default=80.0, help="zenith cut, degrees")
+    s.add_argument("--restarts", type=int, default=2)
+    s.add_argument("--seed", type=int, default=0)
+    s.add_argument("--jobs", type=int, default=None, help="worker processes (default: cores)")
+    s.add_argument("--no-progress", action="store_true")
+    s.set_defaults(func=cmd_sweep)
+    s = sub.add_parser("report", help="Markdown report of a sweep folder")
+    s.add_argument("sweep_dir")
+    s.set_defaults(func=cmd_report)
     s = sub.add_parser("demo", help="synthetic material -> fits -> ranking -> posterior")
     s.add_argument("--out", default="demo-out", help="output folder")
     s.add_argument("--no-progress", action="store_true")

@@ -41,3 +41,7 @@ class ChainTooShortError(BrdffitError, RuntimeError):
     def __init__(self, message: str, estimate: object = None) -> None:
         self.estimate = estimate
         super().__init__(message)
+
+
+class SweepError(BrdffitError, ValueError):
+    """A sweep folder, material source or sweep setting is not usable; the message names it."""

@@ -1,0 +1,303 @@
+"""Ranking of models across many materials, from a sweep folder's JSON files alone.
+
+Per material, the models fitted under one metric are ranked as :func:`brdffit.rank`
+does (by the metric value; AIC and BIC ranks beside it; unconverged and missing fits
+last). Over all materials each model gets its mean rank, its wins (materials where it
+ranks first) and its median relative error ``loss / best loss on that material - 1``
+(converged fits only), each with a 95% percentile bootstrap interval over materials
+(``numpy.random.default_rng(seed)``, materials drawn with replacement). Families come
+from :mod:`brdffit.families`.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import math
+import os
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from brdffit.errors import SweepError
+from brdffit.families import FAMILIES, family_of
+from brdffit.rank import _ranks
+
+
+@dataclass(frozen=True)
+class Record:
+    """One result file of a sweep, the fields the ranking and the Pareto study read.
+
+    ``loss`` is the value of ``metric`` (the one fitted), ``losses`` every metric on
+    the same samples; ``wall_time`` in s; ``eval_ns`` ns per sample (``nan`` if not
+    timed); ``status`` the :class:`brdffit.Status` name.
+    """
+
+    material: str
+    family: str
+    model: str
+    metric: str
+    loss: float
+    losses: dict
+    aic: float
+    bic: float
+    n_free: int
+    converged: bool
+    status: str
+    wall_time: float
+    eval_ns: float
+
+
+@dataclass(frozen=True)
+class SweepResults:
+    """A sweep folder read back: manifest, results (sorted), and recorded errors."""
+
+    manifest: dict
+    records: tuple[Record, ...]
+    errors: tuple[dict, ...]
+
+    @property
+    def materials(self) -> list[str]:
+        """Materials of the manifest, in its order."""
+        return list(self.manifest["materials"])
+
+    @property
+    def models(self) -> list[str]:
+        """Models of the manifest, in its order."""
+        return list(self.manifest["models"])
+
+    @property
+    def metrics(self) -> list[str]:
+        """Metrics of the manifest, in its order."""
+        return list(self.manifest["metrics"])
+
+    def family(self, material: str) -> str:
+        """Family recorded in the manifest (else from the name)."""
+        m = self.manifest["materials"].get(material, {})
+        return m.get("family") or family_of(material)
+
+
+def _num(x: object) -> float:
+    return float("nan") if x is None else float(x)
+
+
+def load_sweep(sweep_dir: str | os.PathLike[str]) -> SweepResults:
+    """Read ``sweep.json`` and every ``<material>/<model>__<metric>[.error].json``."""
+    root = Path(sweep_dir)
+    try:
+        manifest = json.loads((root / "sweep.json").read_text())
+    except (OSError, ValueError) as e:
+        raise SweepError(f"{root}: not a sweep folder (sweep.json: {e})") from e
+    records, errors = [], []
+    for p in sorted(root.glob("*/*.json")):
+        d = json.loads(p.read_text())
+        if p.name.endswith(".error.json"):
+            errors.append(d)
+            continue
+        records.append(
+            Record(
+                material=d["material"],
+                family=d.get("family") or family_of(d["material"]),
+                model=d["model"],
+                metric=d["metric"],
+                loss=_num(d["loss"]),
+                losses={k: _num(v) for k, v in d.get("losses", {}).items()},
+                aic=_num(d.get("aic")),
+                bic=_num(d.get("bic")),
+                n_free=int(d.get("n_free", 0)),
+                converged=bool(d.get("converged", False)),
+                status=str(d.get("status", "")),
+                wall_time=_num(d.get("wall_time")),
+                eval_ns=_num(d.get("eval_ns_per_sample")),
+            )
+        )
+    return SweepResults(manifest, tuple(records), tuple(errors))
+
+
+@dataclass(frozen=True)
+class Matrices:
+    """Materials x models arrays for one metric (NaN where missing or unconverged).
+
+    ``loss``, ``aic``, ``bic``, ``rel`` (loss / best - 1); ``rank``, ``rank_aic``,
+    ``rank_bic`` (1 = best; missing and unconverged ranked last).
+    """
+
+    metric: str
+    materials: tuple[str, ...]
+    families: tuple[str, ...]
+    models: tuple[str, ...]
+    loss: np.ndarray
+    aic: np.ndarray
+    bic: np.ndarray
+    rel: np.ndarray
+    rank: np.ndarray
+    rank_aic: np.ndarray
+    rank_bic: np.ndarray
+
+
+def matrices(res: SweepResults, metric: str) -> Matrices:
+    """The per-material values and ranks of every model under ``metric``."""
+    if metric not in res.metrics:
+        raise SweepError(f"metric {metric!r} is not in this sweep ({', '.join(res.metrics)})")
+    mats, mods = res.materials, res.models
+    shape = (len(mats), len(mods))
+    loss, aic, bic = (np.full(shape, np.nan) for _ in range(3))
+    im, jm = {m: i for i, m in enumerate(mats)}, {m: j for j, m in enumerate(mods)}
+    for r in res.records:
+        if r.metric == metric and r.converged and r.material in im and r.model in jm:
+            i, j = im[r.material], jm[r.model]
+            loss[i, j], aic[i, j], bic[i, j] = r.loss, r.aic, r.bic
+    best = np.array([np.nanmin(row) if np.isfinite(row).any() else np.nan for row in loss])
+    with np.errstate(invalid="ignore", divide="ignore"):
+        rel = loss / best[:, None] - 1.0
+    return Matrices(
+        metric,
+        tuple(mats),
+        tuple(res.family(m) for m in mats),
+        tuple(mods),
+        loss,
+        aic,
+        bic,
+        rel,
+        np.array([_ranks(row) for row in loss]).reshape(shape),
+        np.array([_ranks(row) for row in aic]).reshape(shape),
+        np.array([_ranks(row) for row in bic]).reshape(shape),
+    )
+
+
+@dataclass(frozen=True)
+class AggregateRow:
+    """One model over all materials; each ``(lo, hi)`` is a 95% bootstrap interval."""
+
+    model: str
+    mean_rank: float
+    mean_rank_ci: tuple[float, float]
+    wins: int
+    wins_ci: tuple[float, float]
+    median_rel_err: float
+    median_rel_err_ci: tuple[float, float]
+    n_materials: int
+
+
+def _stats(rank: np.ndarray, rel: np.ndarray, axis: int):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN columns -> NaN
+        return rank.mean(axis), (rank == 1).sum(axis), np.nanmedian(rel, axis)
+
+
+def aggregate(mx: Matrices, *, n_boot: int = 1000, seed: int = 0) -> tuple[AggregateRow, ...]:
+    """Mean rank, wins and median relative error per model, best mean rank first."""
+    n = len(mx.materials)
+    mean, wins, med = _stats(mx.rank, mx.rel, 0)
+    idx = np.random.default_rng(seed).integers(0, n, (n_boot, n))
+    b_mean, b_wins, b_med = _stats(mx.rank[idx], mx.rel[idx], 1)
+
+    def ci(b: np.ndarray, j: int) -> tuple[float, float]:
+        col = b[:, j][np.isfinite(b[:, j])]
+        if col.size == 0:
+            return (math.nan, math.nan)
+        return tuple(float(x) for x in np.percentile(col, [2.5, 97.5]))
+
+    rows = [
+        AggregateRow(
+            model=m,
+            mean_rank=float(mean[j]),
+            mean_rank_ci=ci(b_mean, j),
+            wins=int(wins[j]),
+            wins_ci=ci(b_wins.astype(float), j),
+            median_rel_err=float(med[j]),
+            median_rel_err_ci=ci(b_med, j),
+            n_materials=int(np.isfinite(mx.loss[:, j]).sum()),
+        )
+        for j, m in enumerate(mx.models)
+    ]
+    return tuple(sorted(rows, key=lambda r: (r.mean_rank, r.model)))
+
+
+def _table(head: list[str], body: list[list[str]], fmt: str) -> str:
+    if fmt == "csv":
+        buf = io.StringIO()
+        csv.writer(buf, lineterminator="\n").writerows([head] + body)
+        return buf.getvalue()
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    return "\n".join(lines + ["| " + " | ".join(b) + " |" for b in body]) + "\n"
+
+
+def aggregate_table(rows: tuple[AggregateRow, ...], fmt: str = "markdown") -> str:
+    """The aggregate ranking as a Markdown (``fmt="markdown"``) or CSV table."""
+    if fmt == "csv":
+        head = ["model", "mean_rank", "mean_rank_lo", "mean_rank_hi", "wins", "wins_lo"]
+        head += ["wins_hi", "median_rel_err", "median_rel_err_lo", "median_rel_err_hi", "n"]
+        body = [
+            [r.model, f"{r.mean_rank:.6g}", *(f"{x:.6g}" for x in r.mean_rank_ci), str(r.wins)]
+            + [f"{x:.6g}" for x in (*r.wins_ci, r.median_rel_err, *r.median_rel_err_ci)]
+            + [str(r.n_materials)]
+            for r in rows
+        ]
+        return _table(head, body, "csv")
+    head = ["model", "mean rank [95% CI]", "wins [95% CI]", "median rel. error [95% CI]", "n"]
+    body = [
+        [
+            r.model,
+            f"{r.mean_rank:.2f} [{r.mean_rank_ci[0]:.2f}, {r.mean_rank_ci[1]:.2f}]",
+            f"{r.wins} [{r.wins_ci[0]:.0f}, {r.wins_ci[1]:.0f}]",
+            f"{r.median_rel_err:.3g} [{r.median_rel_err_ci[0]:.3g}, {r.median_rel_err_ci[1]:.3g}]",
+            str(r.n_materials),
+        ]
+        for r in rows
+    ]
+    return _table(head, body, "markdown")
+
+
+def per_material_table(mx: Matrices, fmt: str = "markdown") -> str:
+    """Every (material, model): metric value, AIC, BIC, their ranks, relative error."""
+    head = ["material", "family", "model", mx.metric, "AIC", "BIC", "rank", "rank AIC"]
+    head += ["rank BIC", "rel. error"]
+    body = []
+    for i, mat in enumerate(mx.materials):
+        for j in np.argsort(mx.rank[i], kind="stable"):
+            vals = (mx.loss[i, j], mx.aic[i, j], mx.bic[i, j])
+            body.append(
+                [mat, mx.families[i], mx.models[j], *(f"{v:.6g}" for v in vals)]
+                + [str(mx.rank[i, j]), str(mx.rank_aic[i, j]), str(mx.rank_bic[i, j])]
+                + [f"{mx.rel[i, j]:.4g}"]
+            )
+    return _table(head, body, fmt)
+
+
+def material_order(mx: Matrices) -> np.ndarray:
+    """Row order grouping materials by family (family order of :data:`FAMILIES`), then name."""
+    fam = {f: k for k, f in enumerate(FAMILIES)}
+    return np.array(
+        sorted(range(len(mx.materials)), key=lambda i: (fam.get(mx.families[i], 99), i)), int
+    )
+
+
+def rank_matrix_figure(mx: Matrices, rows: tuple[AggregateRow, ...] | None = None):
+    """Image of ranks, materials (grouped by family) x models (best mean rank first)."""
+    import matplotlib.pyplot as plt
+
+    order = material_order(mx)
+    cols = [mx.models.index(r.model) for r in (rows or aggregate(mx, n_boot=1))]
+    img = mx.rank[np.ix_(order, cols)]
+    n, k = img.shape
+    fig, ax = plt.subplots(figsize=(4.5 + 0.55 * k, 2.4 + 0.25 * n))
+    im = ax.imshow(img, cmap="viridis_r", aspect="auto", vmin=1, vmax=max(k, 2))
+    ax.set_xticks(range(k), [mx.models[c] for c in cols], rotation=60, ha="right", fontsize=8)
+    ax.set_yticks(range(n), [f"{mx.families[i]}: {mx.materials[i]}" for i in order], fontsize=7)
+    fams = [mx.families[i] for i in order]
+    for y in range(1, n):
+        if fams[y] != fams[y - 1]:
+            ax.axhline(y - 0.5, color="w", lw=2)
+    if n * k <= 400:
+        for y in range(n):
+            for x in range(k):
+                c = "k" if img[y, x] <= (k + 1) / 2 else "w"
+                ax.text(x, y, str(img[y, x]), ha="center", va="center", fontsize=7, color=c)
+    fig.colorbar(im, ax=ax, label="rank (1 = best)")
+    ax.set_title(f"rank by {mx.metric} per material")
+    fig.tight_layout()
+    return fig

@@ -1,0 +1,420 @@
+"""Sweeps: fit many materials x models x metrics, one JSON file per result, resumable.
+
+A sweep folder holds ``sweep.json`` (the manifest, written first: materials with
+their sources and families, models with options, metrics, settings) and one file per
+task, ``<material>/<model>__<metric>.json``: :meth:`FitResult.to_dict` (NaN as null)
+plus ``material``, ``family``, ``eval_ns_per_sample`` and ``eval_n``. A task whose
+file exists and parses is finished and never redone, so an interrupted sweep resumes
+where it stopped; every file is written atomically by the worker that made it, so a
+kill loses at most the fits in flight. A fit that does not converge is a result
+(``converged`` false, ``status`` says why); an exception is written to
+``<model>__<metric>.error.json`` and the task is tried again on the next run.
+
+Times are measured in the worker the same way for every model: ``wall_time`` is the
+fit's own clock (:func:`brdffit.fit`, compile included on a worker's first fit of a
+model and grid shape, so compare medians over materials); ``eval_ns_per_sample`` is
+the best of 3 warm calls of ``jax.jit(model.eval)`` at the fitted parameters on the
+material's valid directions tiled to ``eval_n`` samples.
+
+Workers are processes started with the ``spawn`` method (JAX is not fork-safe);
+``jobs=1`` runs the tasks in the calling process.
+"""
+
+from __future__ import annotations
+
+import concurrent.futures as cf
+import json
+import multiprocessing
+import os
+import time
+import traceback
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from brdffit.atomic import write_text
+from brdffit.errors import SweepError
+from brdffit.families import family_of
+
+MANIFEST = "sweep.json"
+SETTINGS = ("stride", "cut_deg", "n_restarts", "seed", "max_steps", "eval_n")
+
+# Synthetic material recipes: (family word, model, parameter sampler).
+_SYNTH = (
+    ("plastic", "walter"),
+    ("metal", "walter"),
+    ("fabric", "oren_nayar"),
+    ("paint", "blinn_phong"),
+)
+
+
+@dataclass(frozen=True)
+class Material:
+    """One material of a sweep.
+
+    ``kind`` is ``"merl"``, ``"nbrdf"`` (``path`` the file) or ``"synthetic"``
+    (``spec``: generating model, parameters, noise and seed).
+    """
+
+    name: str
+    family: str
+    kind: str
+    path: str | None = None
+    spec: dict | None = None
+
+
+@dataclass(frozen=True)
+class Task:
+    """One (material, model, metric) fit and the settings shared by the sweep."""
+
+    material: Material
+    model: str
+    metric: str
+    settings: dict = field(default_factory=dict)
+
+    def path(self, out: Path) -> Path:
+        """Result file ``<out>/<material>/<model>__<metric>.json``."""
+        return Path(out) / self.material.name / f"{self.model}__{self.metric}.json"
+
+
+@dataclass(frozen=True)
+class SweepSummary:
+    """What one :func:`run_sweep` call did (counts of tasks) and how long it took (s)."""
+
+    out: str
+    n_tasks: int
+    n_skipped: int
+    n_done: int
+    n_unconverged: int
+    n_errors: int
+    wall_time: float
+
+
+def _folder_materials(folder: str | os.PathLike[str], kind: str, pattern: str, names):
+    d = Path(folder)
+    if not d.is_dir():
+        raise SweepError(f"{d}: not a folder of {kind} files")
+    found = {p.stem: p for p in sorted(d.glob(pattern))}
+    if names:
+        missing = [n for n in names if n not in found]
+        if missing:
+            raise SweepError(f"{d}: no {kind} material named {', '.join(missing)}")
+        found = {n: found[n] for n in names}
+    if not found:
+        raise SweepError(f"{d}: no {pattern} files")
+    return [Material(n, family_of(n), kind, str(p.resolve())) for n, p in found.items()]
+
+
+def merl_materials(folder: str | os.PathLike[str], names: Sequence[str] | None = None):
+    """Materials from the ``*.binary`` files of ``folder`` (``names``: pick some stems)."""
+    return _folder_materials(folder, "merl", "*.binary", names)
+
+
+def nbrdf_materials(folder: str | os.PathLike[str], names: Sequence[str] | None = None):
+    """Materials from the NBRDF networks (``*.json`` + ``*.h5``) of ``folder``."""
+    return _folder_materials(folder, "nbrdf", "*.json", names)
+
+
+def synthetic_materials(n: int, *, seed: int = 0, noise_mult: float = 0.03) -> list[Material]:
+    """``n`` synthetic materials cycling plastic, metal, fabric, paint, seeded parameters.
+
+    Plastic: Walter/GGX, kd U(0.05, 0.6), f0 0.04, alpha log-U(0.05, 0.3); metal: Walter,
+    kd U(0, 0.03), f0 U(0.5, 0.95), alpha log-U(0.03, 0.2); fabric: Oren-Nayar, rho
+    U(0.1, 0.7), sigma U(0.2, 0.8); paint: Blinn-Phong, kd U(0.1, 0.6), ks U(0.02, 0.2),
+    n log-U(10, 500). Log-normal noise ``noise_mult``; material i uses seed ``seed + i``.
+    """
+    if n < 1:
+        raise SweepError(f"--synthetic {n}: need at least 1 material")
+    out = []
+    for i in range(n):
+        word, model = _SYNTH[i % len(_SYNTH)]
+        rng = np.random.default_rng(seed + i)
+        u = rng.uniform
+
+        def logu(a: float, b: float, rng=rng) -> float:
+            return float(np.exp(rng.uniform(np.log(a), np.log(b))))
+
+        if word == "plastic":
+            params = {"kd": u(0.05, 0.6, 3).tolist(), "f0": [0.04] * 3, "alpha": logu(0.05, 0.3)}
+        elif word == "metal":
+            params = {"kd": u(0, 0.03, 3).tolist(), "f0": u(0.5, 0.95, 3).tolist()}
+            params["alpha"] = logu(0.03, 0.2)
+        elif word == "fabric":
+            params = {"rho": u(0.1, 0.7, 3).tolist(), "sigma": float(u(0.2, 0.8))}
+        else:
+            params = {"kd": u(0.1, 0.6, 3).tolist(), "ks": u(0.02, 0.2, 3).tolist()}
+            params["n"] = logu(10.0, 500.0)
+        spec = {"model": model, "params": params, "noise_mult": noise_mult, "seed": seed + i}
+        name = f"syn{i:02d}-{word}"
+        out.append(Material(name, family_of(name), "synthetic", None, spec))
+    return out
+
+
+def load_material(material: Material, stride: tuple[int, int, int]):
+    """The :class:`Measurements` of ``material`` on the MERL grid of ``stride``."""
+    if material.kind == "synthetic":
+        from brdffit import models
+        from brdffit.synthetic import synthesize
+
+        s = material.spec
+        return synthesize(
+            models.get(s["model"]),
+            s["params"],
+            stride=stride,
+            noise_mult=s["noise_mult"],
+            seed=s["seed"],
+            source=f"synthetic {material.name} ({s['model']})",
+        )
+    from brdffit.loading import load_measurements
+
+    return load_measurements(material.path, stride=stride)
+
+
+_CACHE: dict = {}
+
+
+def _cached_data(material: Material, stride: tuple[int, int, int]):
+    key = (material.name, stride)
+    if key not in _CACHE:
+        _CACHE.clear()
+        _CACHE[key] = load_material(material, stride)
+    return _CACHE[key]
+
+
+def eval_cost(model, params: dict, data, *, n: int = 65536, repeats: int = 3) -> float:
+    """Best-of-``repeats`` warm time of ``jax.jit(model.eval)`` on ``n`` samples, ns/sample.
+
+    The directions are the valid samples of ``data`` tiled (or cut) to ``n``.
+    """
+    import jax
+    import jax.numpy as jnp
+
+    idx = np.resize(np.flatnonzero(data.valid), n)
+    wi, wo = jnp.asarray(data.wi[idx]), jnp.asarray(data.wo[idx])
+    p = {k: jnp.asarray(v) for k, v in params.items()}
+    f = jax.jit(model.eval)
+    f(p, wi, wo).block_until_ready()
+    best = np.inf
+    for _ in range(repeats):
+        t = time.perf_counter()
+        f(p, wi, wo).block_until_ready()
+        best = min(best, time.perf_counter() - t)
+    return float(best / n * 1e9)
+
+
+def run_task(task: Task, out: str) -> dict:
+    """Fit one task and write its result file atomically; returns a short status dict.
+
+    An exception is written to the task's ``.error.json`` instead (and returned).
+    """
+    path = task.path(Path(out))
+    err_path = path.with_suffix(".error.json")
+    try:
+        from brdffit import models
+        from brdffit.fit import fit
+
+        s = task.settings
+        data = _cached_data(task.material, tuple(s["stride"]))
+        model = models.get(task.model)
+        r = fit(
+            model,
+            data,
+            task.metric,
+            cut_deg=s["cut_deg"],
+            n_restarts=s["n_restarts"],
+            seed=s["seed"],
+            max_steps=s["max_steps"],
+            throw=False,
+        )
+        d = json.loads(r.to_json())
+        ns = eval_cost(model, r.params, data, n=s["eval_n"]) if r.converged else None
+        d.update(
+            material=task.material.name,
+            family=task.material.family,
+            eval_ns_per_sample=ns,
+            eval_n=s["eval_n"],
+        )
+        path.parent.mkdir(parents=True, exist_ok=True)
+        write_text(path, json.dumps(d, indent=1))
+        if err_path.exists():
+            err_path.unlink()
+        return {"ok": True, "converged": r.converged, "task": path.name}
+    except Exception as e:  # recorded, the sweep goes on
+        info = {
+            "material": task.material.name,
+            "model": task.model,
+            "metric": task.metric,
+            "error": type(e).__name__,
+            "message": str(e),
+            "traceback": traceback.format_exc(),
+        }
+        path.parent.mkdir(parents=True, exist_ok=True)
+        write_text(err_path, json.dumps(info, indent=1))
+        return {"ok": False, "converged": False, "task": path.name, "error": str(e)}
+
+
+def is_finished(path: Path) -> bool:
+    """True when ``path`` is a result file that parses and has a loss."""
+    try:
+        return "loss" in json.loads(Path(path).read_text())
+    except (OSError, ValueError):
+        return False
+
+
+def _write_manifest(out: Path, materials, models_, metrics, settings: dict) -> dict:
+    """Write (or extend, on resume) ``sweep.json``; settings must match an existing one."""
+    from brdffit import models
+
+    man = {"materials": {}, "models": {}, "metrics": [], "settings": settings}
+    old_path = out / MANIFEST
+    if old_path.exists():
+        try:
+            man = json.loads(old_path.read_text())
+        except ValueError as e:
+            raise SweepError(f"{old_path}: not a sweep manifest ({e})") from e
+        for k in SETTINGS:
+            if man["settings"].get(k) != settings[k]:
+                raise SweepError(
+                    f"{old_path}: setting {k}={man['settings'].get(k)!r} differs from "
+                    f"{settings[k]!r}; resume with the same settings or use a new folder"
+                )
+    for m in materials:
+        old = man["materials"].get(m.name)
+        if old is not None and (old["kind"], old["path"], old["spec"]) != (m.kind, m.path, m.spec):
+            raise SweepError(f"{old_path}: material {m.name} already comes from {old['path']}")
+        man["materials"][m.name] = asdict(m)
+    for name in models_:
+        man["models"][name] = {k: repr(v) for k, v in models.get(name).options().items()}
+    man["metrics"] = list(dict.fromkeys([*man["metrics"], *metrics]))
+    write_text(old_path, json.dumps(man, indent=1))
+    return man
+
+
+def _clean_temporaries(out: Path) -> None:
+    """Remove temporary files a killed writer left (``.<name>.json.*.tmp``)."""
+    for p in out.rglob(".*.tmp"):
+        p.unlink(missing_ok=True)
+
+
+def run_sweep(
+    out: str | os.PathLike[str],
+    materials: Sequence[Material],
+    models: Sequence[str],
+    metrics: Sequence[str],
+    *,
+    stride: tuple[int, int, int] | int = (1, 1, 1),
+    cut_deg: float | None = 80.0,
+    n_restarts: int = 2,
+    seed: int = 0,
+    max_steps: int = 256,
+    eval_n: int = 65536,
+    jobs: int | None = None,
+    progress: bool = True,
+) -> SweepSummary:
+    """Fit every (material, model, metric) not yet finished in folder ``out``.
+
+    Arguments:
+    - ``materials``: from :func:`merl_materials`, :func:`nbrdf_materials` or
+      :func:`synthetic_materials`; ``models``: registry names (default options);
+      ``metrics``: metric names.
+    - ``stride``, ``cut_deg``, ``n_restarts``, ``seed``, ``max_steps``: as in
+      :func:`brdffit.fit` and :func:`brdffit.loading.load_measurements`; a resumed
+      sweep must use the same values (else :class:`SweepError`).
+    - ``eval_n``: samples of the evaluation-cost timing (module docstring).
+    - ``jobs``: worker processes (default ``os.cpu_count()``); 1 runs in this process.
+    - ``progress``: show a tqdm bar (tasks, materials finished, time left).
+    """
+    from brdffit import models as registry
+    from brdffit.metrics import get_metric
+
+    t0 = time.perf_counter()
+    out = Path(out)
+    if isinstance(stride, int):
+        stride = (stride, stride, stride)
+    for name in models:
+        registry.get(name)  # an unknown name fails before any work
+    for name in metrics:
+        get_metric(name)
+    if not materials or not models or not metrics:
+        raise SweepError("a sweep needs at least one material, one model and one metric")
+    settings = dict(
+        stride=list(stride), cut_deg=cut_deg, n_restarts=n_restarts, seed=seed, max_steps=max_steps
+    )
+    settings["eval_n"] = eval_n
+    out.mkdir(parents=True, exist_ok=True)
+    _write_manifest(out, materials, models, metrics, settings)
+    _clean_temporaries(out)
+    tasks = [Task(m, mo, me, settings) for m in materials for mo in models for me in metrics]
+    todo = [t for t in tasks if not is_finished(t.path(out))]
+    left = {m.name: sum(t.material.name == m.name for t in todo) for m in materials}
+    counts = {"done": 0, "unconverged": 0, "errors": 0}
+    bar = _progress_bar(len(todo), len(materials), sum(v == 0 for v in left.values()), progress)
+
+    def record(task: Task, status: dict) -> None:
+        counts["done"] += status["ok"]
+        counts["unconverged"] += status["ok"] and not status["converged"]
+        counts["errors"] += not status["ok"]
+        left[task.material.name] -= 1
+        n_mat = sum(v == 0 for v in left.values())
+        bar.set_postfix_str(
+            f"materials {n_mat}/{len(materials)}, last {task.material.name}/{task.model}",
+            refresh=False,
+        )
+        bar.update(1)
+
+    try:
+        if (jobs or os.cpu_count() or 1) <= 1:
+            for t in todo:
+                record(t, run_task(t, str(out)))
+        else:
+            _run_parallel(todo, out, jobs or os.cpu_count() or 1, record)
+    finally:
+        bar.close()
+    return SweepSummary(
+        str(out),
+        len(tasks),
+        len(tasks) - len(todo),
+        counts["done"],
+        counts["unconverged"],
+        counts["errors"],
+        time.perf_counter() - t0,
+    )
+
+
+def _run_parallel(todo: list[Task], out: Path, jobs: int, record) -> None:
+    ctx = multiprocessing.get_context("spawn")
+    with cf.ProcessPoolExecutor(max_workers=jobs, mp_context=ctx, initializer=_init) as pool:
+        futures = {pool.submit(run_task, t, str(out)): t for t in todo}
+        try:
+            for fut in cf.as_completed(futures):
+                t = futures[fut]
+                try:
+                    status = fut.result()
+                except Exception as e:  # a dead worker: record it, go on
+                    status = {"ok": False, "converged": False, "error": str(e)}
+                    info = {"material": t.material.name, "model": t.model, "metric": t.metric}
+                    info.update(error=type(e).__name__, message=str(e))
+                    err = t.path(out).with_suffix(".error.json")
+                    err.parent.mkdir(parents=True, exist_ok=True)
+                    write_text(err, json.dumps(info, indent=1))
+                record(t, status)
+        except BaseException:
+            pool.shutdown(wait=False, cancel_futures=True)
+            raise
+
+
+def _init() -> None:
+    """Worker start-up: the on-disk XLA cache, so workers share compiled code."""
+    from brdffit import enable_compilation_cache
+
+    enable_compilation_cache()
+
+
+def _progress_bar(total: int, n_materials: int, n_finished: int, enabled: bool):
+    from tqdm.auto import tqdm
+
+    bar = tqdm(total=total, desc="sweep", unit="fit", disable=not enabled, dynamic_ncols=True)
+    bar.set_postfix_str(f"materials {n_finished}/{n_materials}", refresh=False)
+    return bar

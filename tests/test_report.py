@@ -1,0 +1,49 @@
+"""The sweep report: written from the JSON files alone, reproducible, and the CLI around it."""
+
+from __future__ import annotations
+
+import re
+import shutil
+
+from brdffit.cli import main
+from brdffit.report import write_report
+from tests.sweep_fixtures import make_sweep
+
+
+def _outputs(path):
+    return {p.name: p.read_bytes() for p in sorted(path.parent.iterdir()) if p.suffix != ".png"}
+
+
+def test_report_files_and_content(tmp_path):
+    path = write_report(make_sweep(tmp_path / "sweep"))
+    assert path == tmp_path / "sweep" / "report" / "report.md"
+    text = path.read_text()
+    for part in ("# Sweep report", "## Metric `low_e2`", "mean rank [95% CI]", "Pareto"):
+        assert part in text
+    for image in re.findall(r"!\[[^]]*\]\(([^)]+)\)", text):
+        assert (path.parent / image).stat().st_size > 1000
+    for name in ("aggregate", "per_material", "pareto"):
+        assert (path.parent / f"{name}_low_e2.csv").exists()
+    assert "1 not converged" in text
+    assert str(tmp_path) not in text
+
+
+def test_report_reproducible_from_json_alone(tmp_path):
+    src = make_sweep(tmp_path / "a")
+    first = _outputs(write_report(src))
+    assert _outputs(write_report(src)) == first  # same files, same report
+    copy = tmp_path / "b"
+    for p in src.rglob("*.json"):
+        if "report" not in p.parts:
+            (copy / p.relative_to(src)).parent.mkdir(parents=True, exist_ok=True)
+            shutil.copy(p, copy / p.relative_to(src))
+    assert _outputs(write_report(copy)) == first
+
+
+def test_report_cli(tmp_path, capsys):
+    src = make_sweep(tmp_path / "s")
+    assert main(["report", str(src)]) == 0
+    assert capsys.readouterr().out.strip().endswith("report.md")
+    assert main(["report", str(tmp_path / "missing")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "sweep.json" in err
