@@ -222,8 +222,9 @@ def fit(
     preps = metrics_mod.prepare_all(data, cut_deg=cut_deg)
     prep = preps[m.name]
     # Normal equations (Cholesky of J^T J + lambda I, p x p) instead of the default QR
-    # of the tall (3N + p) x p damped system: same steps, 4x less linear algebra per
-    # step on MERL-size data. The damping keeps the system positive definite.
+    # of the tall (3N + p) x p damped system: a quarter of the linear algebra per step on
+    # MERL-size data (1.07 s -> 0.27 s at 2.7M residuals). The damping keeps the system
+    # positive definite; it squares the condition number, which float64 absorbs here.
     solver = optx.LevenbergMarquardt(rtol=rtol, atol=atol, linear_solver=lx.Normal(lx.Cholesky()))
     rng = np.random.default_rng(seed)
 

@@ -94,3 +94,28 @@ def test_bad_input_is_one_line_and_exit_2(capsys, merl_file, tmp_path, argv, nee
     out, err = capsys.readouterr()
     assert exit_info.value.code == 2
     assert len(err.strip().splitlines()) == 1 and needle in err, err
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", models.available())
+def test_fit_command_works_for_every_model(capsys, merl_file, tmp_path, name):
+    js = tmp_path / f"{name}.json"
+    code, out, err = _run(
+        capsys,
+        "fit",
+        merl_file,
+        "--model",
+        name,
+        "--restarts",
+        "0",
+        "--json",
+        js,
+        "--stride",
+        "15",
+        "15",
+        "15",
+    )
+    assert code == 0, err
+    d = json.loads(js.read_text())
+    assert d["model"] == name and set(d["params"]) == {p.name for p in models.get(name).parameters}
+    assert np.isfinite(d["loss"])
