@@ -32,7 +32,7 @@ def run_demo(
     out: str | os.PathLike[str] = "demo-out",
     *,
     stride: tuple[int, int, int] = (3, 3, 5),
-    n_steps: int = 2500,
+    n_steps: int = 5400,
     n_subsample: int = 2000,
     progress: bool = True,
     log=print,

@@ -112,6 +112,17 @@ class Ranking:
         }
 
 
+def _changed_options(r: FitResult) -> str:
+    """The static options that differ from the model's defaults, as ``k=v`` text."""
+    from brdffit import models
+
+    try:
+        default = models.get(r.model).options()
+    except ParameterError:  # a model no longer registered: show every option
+        default = {}
+    return ", ".join(f"{k}={v}" for k, v in r.options.items() if default.get(k, object()) != v)
+
+
 def _ranks(values: np.ndarray) -> np.ndarray:
     """1-based ranks, NaN last."""
     order = np.argsort(np.where(np.isfinite(values), values, np.inf), kind="stable")
@@ -152,7 +163,7 @@ def rank(results: Sequence[FitResult], *, by: str = "loss") -> Ranking:
     rows = [
         RankRow(
             model=r.model,
-            options=", ".join(f"{k}={v}" for k, v in r.options.items()),
+            options=_changed_options(r),
             loss=r.loss,
             aic=r.aic,
             bic=r.bic,

@@ -194,6 +194,7 @@ class Posterior:
             t = [flat.get(lab) for lab in self.labels]
         kwargs.setdefault("quantiles", [0.025, 0.5, 0.975])
         kwargs.setdefault("show_titles", True)
+        kwargs.setdefault("title_fmt", ".4g")
         return corner.corner(self.samples(), labels=list(self.labels), truths=t, **kwargs)
 
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import jax.numpy as jnp
 import numpy as np
 
 from brdffit.geometry import uniform_hemisphere
@@ -72,3 +73,24 @@ def random_params(model, rng: np.random.Generator) -> dict:
         )
         out[p.name] = p.to_natural(jnp.asarray(u, float))
     return out
+
+
+def hemisphere_integral(f, scale: float, n_phi: int = 512) -> float:
+    """``int f(h) cos(theta) dw`` over the upper hemisphere for ``f`` peaked at the normal.
+
+    Variable ``t = 1 - cos(theta)`` (``cos sin dtheta = (1 - t) dt``), Gauss-Legendre with
+    24 nodes on 24 panels with geometric ends from ``scale / 16`` to 1 (resolving a peak
+    of width ``scale`` in ``t`` and the tail), and the periodic trapezoid rule in ``phi``
+    (spectrally accurate for a smooth periodic integrand). Fixed shapes: one compile.
+    """
+    ends = np.concatenate([[0.0], np.geomspace(scale / 16.0, 1.0, 24)])
+    x, w = np.polynomial.legendre.leggauss(24)
+    lo, hi = ends[:-1, None], ends[1:, None]
+    t = (0.5 * (hi - lo) * x + 0.5 * (hi + lo)).ravel()
+    wt = (0.5 * (hi - lo) * w).ravel()
+    phi = np.arange(n_phi) * 2.0 * np.pi / n_phi
+    tt, pp = np.meshgrid(t, phi, indexing="ij")
+    s = np.sqrt(tt * (2.0 - tt))
+    h = np.stack([s * np.cos(pp), s * np.sin(pp), 1.0 - tt], axis=-1).reshape(-1, 3)
+    vals = np.asarray(f(jnp.asarray(h))).reshape(tt.shape)
+    return float(np.sum(vals * ((1.0 - t) * wt)[:, None]) * 2.0 * np.pi / n_phi)

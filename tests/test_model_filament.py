@@ -11,7 +11,7 @@ import pytest
 from brdffit.models import _terms, filament
 
 from brdffit import models
-from tests.test_model_walter import hemisphere_integral
+from tests.helpers import hemisphere_integral
 
 PI = np.pi
 WI = np.array([[0.0, 0.0, 1], [0.5, 0.1, 0], [0.3, -0.2, 0], [0.8, 0.3, 0], [-0.2, 0.9, 0]])

@@ -11,7 +11,7 @@ from brdffit.models import low
 from scipy import integrate
 
 from brdffit import models
-from tests.test_model_walter import hemisphere_integral
+from tests.helpers import hemisphere_integral
 
 # Fixed direction pairs: normal, oblique, near mirror, wide, grazing-ish, anisotropic azimuths.
 WI = np.array(
