@@ -19,7 +19,7 @@ ROWS: list[Case] = [
     Case(
         "cook_torrance",
         {"fresnel": "conductor", "diffuse": False},
-        {"ks": [1.0, 0.9, 0.8], "eta": [0.2, 0.9, 1.1], "k": [3.9, 2.4, 2.3], "m": 0.15},
+        {"ks": [0.95, 0.9, 0.8], "eta": [0.2, 0.9, 1.1], "k": [3.9, 2.4, 2.3], "m": 0.15},
     ),
     Case("ward", params={"kd": [0.2, 0.3, 0.4], "ks": [0.1, 0.1, 0.1], "alpha": 0.15}),
     Case("ward", {"normalization": "duer"}, {"alpha": 0.3}),

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from tests.cases import Case
 
+# Filament rows use a coloured base_color: with a grey one, metallic and reflectance trade
+# off exactly (only the diffuse colour b(1 - m) and f0 are observed).
 ROWS: list[Case] = [
     Case(
         "low",
@@ -23,22 +25,46 @@ ROWS: list[Case] = [
         {},
         {"base_color": [0.8, 0.5, 0.2], "metallic": 0.3, "reflectance": 0.6, "roughness": 0.4},
     ),
-    Case("filament", {"diffuse": "burley"}, {"metallic": 0.1, "roughness": 0.7}),
-    Case("filament", {"anisotropy": True}, {"anisotropy": 0.6, "roughness": 0.5}),
+    Case(
+        "filament",
+        {"diffuse": "burley"},
+        {"base_color": [0.7, 0.5, 0.3], "metallic": 0.1, "roughness": 0.7},
+    ),
+    Case(
+        "filament",
+        {"anisotropy": True},
+        {"base_color": [0.3, 0.5, 0.7], "anisotropy": 0.6, "roughness": 0.5},
+    ),
     Case(
         "filament",
         {"clearcoat": True},
-        {"clear_coat": 0.7, "clear_coat_roughness": 0.15, "roughness": 0.3},
+        {
+            "base_color": [0.6, 0.3, 0.2],
+            "clear_coat": 0.7,
+            "clear_coat_roughness": 0.15,
+            "roughness": 0.3,
+        },
     ),
     Case(
         "filament",
         {"sheen": True},
-        {"sheen_color": [0.3, 0.2, 0.1], "sheen_roughness": 0.6, "metallic": 0.2},
+        {
+            "base_color": [0.2, 0.4, 0.6],
+            "sheen_color": [0.3, 0.2, 0.1],
+            "sheen_roughness": 0.6,
+            "metallic": 0.2,
+        },
     ),
     Case(
         "filament",
         {"diffuse": "burley", "anisotropy": True, "clearcoat": True, "sheen": True},
-        {"anisotropy": -0.4, "clear_coat": 0.5, "clear_coat_roughness": 0.6, "roughness": 0.3},
+        {
+            "base_color": [0.5, 0.7, 0.4],
+            "anisotropy": -0.4,
+            "clear_coat": 0.5,
+            "clear_coat_roughness": 0.6,
+            "roughness": 0.3,
+        },
     ),
     Case(
         "filament",
