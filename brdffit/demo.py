@@ -32,8 +32,8 @@ def run_demo(
     out: str | os.PathLike[str] = "demo-out",
     *,
     stride: tuple[int, int, int] = (3, 3, 5),
-    n_steps: int = 5400,
-    n_subsample: int = 2000,
+    n_steps: int = 7000,
+    n_subsample: int = 1000,
     progress: bool = True,
     log=print,
 ) -> dict[str, Path]:
