@@ -34,14 +34,19 @@ class AbstractModel(eqx.Module):
 
     Class attributes each model sets: ``name`` (registry key), ``reference`` (the
     paper), ``reciprocal`` (f(wi, wo) == f(wo, wi)), ``energy_conserving`` (directional
-    albedo <= 1 for every valid parameter value), ``isotropic``.
+    albedo <= 1 for every valid parameter value). ``isotropic`` follows an
+    ``anisotropic`` option where the model has one.
     """
 
     name: ClassVar[str]
     reference: ClassVar[str]
     reciprocal: ClassVar[bool] = True
     energy_conserving: ClassVar[bool] = True
-    isotropic: ClassVar[bool] = True
+
+    @property
+    def isotropic(self) -> bool:
+        """False when the model was built with its ``anisotropic`` option on."""
+        return not getattr(self, "anisotropic", False)
 
     @property
     @abc.abstractmethod

@@ -77,10 +77,6 @@ class AshikhminShirley(AbstractModel):
     energy_conserving: ClassVar[bool] = True
 
     @property
-    def isotropic(self) -> bool:  # type: ignore[override]
-        return not self.anisotropic
-
-    @property
     def parameters(self) -> tuple[Parameter, ...]:
         return (RD, RS) + ((NU, NV) if self.anisotropic else (N,))
 

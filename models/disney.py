@@ -141,10 +141,6 @@ class Disney(AbstractModel):
                 raise ValueError(f"disney: option {k}={v!r} is not a bool")
 
     @property
-    def isotropic(self) -> bool:  # type: ignore[override]
-        return not self.anisotropic
-
-    @property
     def parameters(self) -> tuple[Parameter, ...]:
         base = dataclasses.replace(BASE_COLOR, linear=not (self.specular_tint or self.sheen))
         table = [base, METALLIC] if self.metallic else [base]

@@ -95,10 +95,6 @@ class Kurt(AbstractModel):
             raise ValueError(f"kurt: n_lobes {self.n_lobes!r} is not an integer >= 1")
 
     @property
-    def isotropic(self) -> bool:  # type: ignore[override]
-        return not self.anisotropic
-
-    @property
     def parameters(self) -> tuple[Parameter, ...]:
         lobes = (lobe_parameters(l, self.anisotropic) for l in range(1, self.n_lobes + 1))
         return (KD,) + sum(lobes, ())

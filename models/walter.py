@@ -77,10 +77,6 @@ class Walter(AbstractModel):
             raise ValueError("walter: smith='rational' exists for distribution='beckmann' only")
 
     @property
-    def isotropic(self) -> bool:  # type: ignore[override]
-        return not self.anisotropic
-
-    @property
     def parameters(self) -> tuple[Parameter, ...]:
         rough = (ALPHA_X, ALPHA_Y) if self.anisotropic else (ALPHA,)
         return ((KD,) if self.diffuse else ()) + (F0,) + rough

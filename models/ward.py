@@ -92,10 +92,6 @@ class Ward(AbstractModel):
             )
 
     @property
-    def isotropic(self) -> bool:  # type: ignore[override]
-        return not self.anisotropic
-
-    @property
     def parameters(self) -> tuple[Parameter, ...]:
         rough = (ALPHA_X, ALPHA_Y) if self.anisotropic else (ALPHA,)
         return ((KD,) if self.diffuse else ()) + (KS,) + rough
