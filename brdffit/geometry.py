@@ -40,8 +40,9 @@ def _rot_z(v: np.ndarray, angle: np.ndarray) -> np.ndarray:
     return np.stack([c * x - s * y, s * x + c * y, z], axis=-1)
 
 
-def spherical_to_vector(theta: np.ndarray, phi: np.ndarray) -> np.ndarray:
+def spherical_to_vector(theta: float | np.ndarray, phi: float | np.ndarray) -> np.ndarray:
     """Unit vector(s) with polar angle ``theta`` from +z and azimuth ``phi`` from +x."""
+    theta, phi = np.asarray(theta, float), np.asarray(phi, float)
     st = np.sin(theta)
     return np.stack([st * np.cos(phi), st * np.sin(phi), np.cos(theta)], axis=-1)
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import jax.numpy as jnp
 import numpy as np
 
-from brdffit.geometry import uniform_hemisphere
+from brdffit.geometry import spherical_to_vector, uniform_hemisphere
 
 
 def random_pairs(seed: int, n: int) -> tuple[np.ndarray, np.ndarray]:
@@ -94,3 +94,24 @@ def hemisphere_integral(f, scale: float, n_phi: int = 512) -> float:
     h = np.stack([s * np.cos(pp), s * np.sin(pp), 1.0 - tt], axis=-1).reshape(-1, 3)
     vals = np.asarray(f(jnp.asarray(h))).reshape(tt.shape)
     return float(np.sum(vals * ((1.0 - t) * wt)[:, None]) * 2.0 * np.pi / n_phi)
+
+
+def half_vector_albedo(evaluate, params, theta_i, scale, n=150):
+    """Directional albedo (red channel) at ``theta_i`` by quadrature over half vectors.
+
+    ``dw_o = 4 (wi.h) dw_h``; ``scale`` is the lobe width in tan(theta_h).
+
+    theta_h = arctan(scale x), x in [0, 8] Gauss-Legendre, phi_h midpoint rule.
+    """
+    x, wx = np.polynomial.legendre.leggauss(n)
+    x, wx = 4.0 * (x + 1), 4.0 * wx
+    th, dth = np.arctan(scale * x), scale / (1 + (scale * x) ** 2)
+    ph = (np.arange(2 * n) + 0.5) / (2 * n) * 2 * np.pi
+    TH, PH = np.meshgrid(th, ph, indexing="ij")
+    weight = ((wx * dth * np.sin(th))[:, None] * np.ones_like(PH)).ravel() * (np.pi / n)
+    h = spherical_to_vector(TH, PH).reshape(-1, 3)
+    wi = np.broadcast_to(spherical_to_vector(theta_i, 0.0), h.shape)
+    d = np.sum(wi * h, -1)
+    wo = 2 * d[:, None] * h - wi
+    f = np.asarray(evaluate(params, wi, wo))[:, 0]
+    return float(np.sum(np.where(d > 0, f * np.clip(wo[:, 2], 0, None) * 4 * d, 0) * weight))

@@ -11,6 +11,7 @@ import pytest
 from brdffit.models import _terms
 
 from brdffit import models
+from tests.helpers import half_vector_albedo
 
 COS = np.linspace(0.0, 1.0, 41)
 # Jitted once per module: one compile each instead of one per eager primitive and test.
@@ -119,34 +120,15 @@ def test_beckmann_d_integrates_to_one_against_cos_theta_h(m):
     assert total == pytest.approx(1.0, abs=1e-9)
 
 
-def specular_albedo(evaluate, params, theta_i, scale, n=150):
-    """Directional albedo by quadrature over half vectors: dw_o = 4 (wi.h) dw_h.
-
-    theta_h = arctan(scale x), x in [0, 8] Gauss-Legendre, phi_h midpoint rule.
-    """
-    x, wx = np.polynomial.legendre.leggauss(n)
-    x, wx = 4.0 * (x + 1), 4.0 * wx
-    th, dth = np.arctan(scale * x), scale / (1 + (scale * x) ** 2)
-    ph = (np.arange(2 * n) + 0.5) / (2 * n) * 2 * np.pi
-    TH, PH = np.meshgrid(th, ph, indexing="ij")
-    weight = ((wx * dth * np.sin(th))[:, None] * np.ones_like(PH)).ravel() * (np.pi / n)
-    h = _direction(TH, PH).reshape(-1, 3)
-    wi = np.broadcast_to(_direction(theta_i, 0.0), h.shape)
-    d = np.sum(wi * h, -1)
-    wo = 2 * d[:, None] * h - wi
-    f = np.asarray(evaluate(params, wi, wo))[:, 0]
-    return float(np.sum(np.where(d > 0, f * np.clip(wo[:, 2], 0, None) * 4 * d, 0) * weight))
-
-
 def test_specular_albedo_at_most_one_with_unit_fresnel():
     # V-cavity masking: with F = 1 and ks = 1 the lobe loses, never gains, energy.
     model = models.get("cook_torrance", diffuse=False)
     evaluate = jax.jit(model.eval)
     for m in (0.05, 0.5, 2.0):
         params = {"ks": jnp.ones(3), "m": jnp.asarray(m), "f0": jnp.ones(3)}
-        albedos = [specular_albedo(evaluate, params, np.radians(t), m) for t in (0, 45, 80, 89)]
+        albedos = [half_vector_albedo(evaluate, params, np.radians(t), m) for t in (0, 45, 80, 89)]
         # Quadrature error < 1e-4 (150 x 300 nodes against 600 x 1200; horizon kink in phi).
         assert max(albedos) <= 1.0 + 1e-3, (m, albedos)
     # Rough lobe at normal incidence, against the same quadrature at 600 x 1200 nodes (0.89242).
     params = {"ks": jnp.ones(3), "m": jnp.asarray(0.5), "f0": jnp.ones(3)}
-    assert specular_albedo(evaluate, params, 0.0, 0.5) == pytest.approx(0.89242, abs=5e-4)
+    assert half_vector_albedo(evaluate, params, 0.0, 0.5) == pytest.approx(0.89242, abs=5e-4)
