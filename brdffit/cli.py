@@ -185,6 +185,17 @@ def cmd_demo(args) -> None:
     run_demo(args.out, progress=not args.no_progress)
 
 
+def _stride_arg(sp: argparse.ArgumentParser) -> None:
+    sp.add_argument(
+        "--stride",
+        type=int,
+        nargs=3,
+        default=(1, 1, 1),
+        metavar=("TH", "TD", "PD"),
+        help="fit a MERL sub-grid (odd divisors of 90 90 180)",
+    )
+
+
 def build_parser() -> argparse.ArgumentParser:
     from brdffit.metrics import METRICS
 
@@ -193,14 +204,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     def data_args(sp):
         sp.add_argument("file", help="MERL binary, or NBRDF .json/.h5")
-        sp.add_argument(
-            "--stride",
-            type=int,
-            nargs=3,
-            default=(1, 1, 1),
-            metavar=("TH", "TD", "PD"),
-            help="fit a MERL sub-grid (odd divisors of 90 90 180)",
-        )
+        _stride_arg(sp)
 
     def fit_args(sp, with_model=True):
         if with_model:
@@ -256,14 +260,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--materials", help="comma-separated material names to pick")
     s.add_argument("--models", required=True, help="comma-separated model names")
     s.add_argument("--metrics", default="low_e2", help="comma-separated metric names")
-    s.add_argument(
-        "--stride",
-        type=int,
-        nargs=3,
-        default=(1, 1, 1),
-        metavar=("TH", "TD", "PD"),
-        help="fit a MERL sub-grid (odd divisors of 90 90 180)",
-    )
+    _stride_arg(s)
     s.add_argument("--cut", type=float, default=80.0, help="zenith cut, degrees")
     s.add_argument("--restarts", type=int, default=2)
     s.add_argument("--seed", type=int, default=0)

@@ -145,23 +145,6 @@ class Measurements:
         """A copy with some fields changed (the original is untouched)."""
         return dataclasses.replace(self, **changes)
 
-    def select(self, mask_or_index: np.ndarray) -> Measurements:
-        """The subset of samples picked by a boolean mask or an index array (no grid)."""
-        sel = np.asarray(mask_or_index)
-        return Measurements(
-            wi=self.wi[sel],
-            wo=self.wo[sel],
-            theta_h=self.theta_h[sel],
-            theta_d=self.theta_d[sel],
-            phi_d=self.phi_d[sel],
-            values=self.values[sel],
-            weights=self.weights[sel],
-            valid=self.valid[sel],
-            source=self.source,
-            channel_scales=self.channel_scales,
-            grid=None,
-        )
-
     def summary(self) -> str:
         """A few lines for ``brdffit info``: size, validity, value range, provenance."""
         v = self.values[self.valid]

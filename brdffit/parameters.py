@@ -170,19 +170,6 @@ class ParameterLayout:
             return jnp.zeros((0,))
         return jnp.concatenate([jnp.ravel(jnp.asarray(params[p.name])) for p in self.free])
 
-    def natural(self, u: jax.Array) -> Params:
-        """Flat unconstrained vector -> full natural parameter dict, frozen ones included."""
-        free = self.split(u)
-        out = {p.name: p.to_natural(free[p.name]) for p in self.free}
-        out.update(self.frozen)
-        return out
-
-    def natural_free(self, x: jax.Array) -> Params:
-        """Flat natural vector of the free scalars -> full parameter dict."""
-        out = self.split(x)
-        out.update(self.frozen)
-        return out
-
     def unconstrained(self, params: Mapping[str, jax.Array]) -> jax.Array:
         """Natural dict -> flat unconstrained vector of the free parameters."""
         if not self.free:
