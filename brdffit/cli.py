@@ -1,7 +1,8 @@
 """The ``brdffit`` command line; each subcommand is one library call plus printing.
 
 Bad input (a missing or malformed file, an unknown model, option or metric) prints
-one line on stderr naming the problem and exits with code 2.
+one line on stderr naming the problem and exits with code 2. ``brdffit check`` exits
+with code 1 when a numerical check fails.
 """
 
 from __future__ import annotations
@@ -179,6 +180,21 @@ def cmd_report(args) -> None:
     print(write_report(args.sweep_dir))
 
 
+def cmd_check(args) -> int:
+    """Model-level extremes table; exit code 1 when any row fails."""
+    from brdffit import models
+    from brdffit.check import check_model, format_table
+
+    names = args.models or models.available()
+    built = [_model(n, ()) for n in names]  # validate every name before checking
+    rows = [row for m in built for row in check_model(m, args.dtype)]
+    print(format_table(rows, args.format), end="")
+    failed = sum(not r.passed for r in rows)
+    if args.format == "text":
+        print(f"{len(rows) - failed}/{len(rows)} checks passed")
+    return 1 if failed else 0
+
+
 def cmd_demo(args) -> None:
     from brdffit.demo import run_demo
 
@@ -270,6 +286,11 @@ def build_parser() -> argparse.ArgumentParser:
     s = sub.add_parser("report", help="Markdown report of a sweep folder")
     s.add_argument("sweep_dir")
     s.set_defaults(func=cmd_report)
+    s = sub.add_parser("check", help="values and gradients at extreme directions and bounds")
+    s.add_argument("models", nargs="*", metavar="MODEL", help="model names (default: all)")
+    s.add_argument("--dtype", default="both", choices=["float32", "float64", "both"])
+    s.add_argument("--format", default="text", choices=["text", "markdown", "csv"])
+    s.set_defaults(func=cmd_check)
     s = sub.add_parser("demo", help="synthetic material -> fits -> ranking -> posterior")
     s.add_argument("--out", default="demo-out", help="output folder")
     s.add_argument("--no-progress", action="store_true")
@@ -284,12 +305,12 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     enable_compilation_cache()
     try:
-        args.func(args)
+        code = args.func(args)
     except (BrdffitError, OSError) as err:
         text = " ".join(str(err).split())
         sys.stderr.write(f"brdffit {args.command}: {text}\n")
         return 2
-    return 0
+    return code or 0
 
 
 if __name__ == "__main__":

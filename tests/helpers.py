@@ -5,6 +5,7 @@ from __future__ import annotations
 import jax.numpy as jnp
 import numpy as np
 
+from brdffit.check import extreme_pairs, params_at_bounds  # noqa: F401  (re-exported)
 from brdffit.geometry import spherical_to_vector, uniform_hemisphere
 
 
@@ -18,46 +19,6 @@ def rotate_z(v: np.ndarray, angle: float) -> np.ndarray:
     """Rotate directions about the normal by ``angle`` radians."""
     c, s = np.cos(angle), np.sin(angle)
     return v @ np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]).T
-
-
-def extreme_pairs() -> tuple[np.ndarray, np.ndarray]:
-    """Hard directions: normal incidence, grazing (cos 1e-6), wi = wo, mirror pairs, mixes."""
-    g = 1e-6
-    s = np.sqrt(1 - g * g)
-    n = np.array([0.0, 0.0, 1.0])
-    graze_x = np.array([s, 0.0, g])
-    graze_y = np.array([0.0, s, g])
-    graze_mx = np.array([-s, 0.0, g])
-    t = np.array([np.sin(1.2), 0.0, np.cos(1.2)])
-    t_mirror = np.array([-np.sin(1.2), 0.0, np.cos(1.2)])
-    t_oblique = np.array([0.3, -0.4, np.sqrt(1 - 0.25)])
-    pairs = [
-        (n, n),
-        (n, graze_x),
-        (graze_x, n),
-        (graze_x, graze_x),
-        (graze_x, graze_mx),
-        (graze_x, graze_y),
-        (t, t),
-        (t, t_mirror),
-        (t_oblique, t_oblique),
-        (t_oblique, t_oblique * np.array([-1, -1, 1])),
-        (n, t),
-    ]
-    wi = np.array([p[0] for p in pairs])
-    wo = np.array([p[1] for p in pairs])
-    return wi, wo
-
-
-def params_at_bounds(model, which: str) -> dict:
-    """Every parameter at its lower (``"low"``) or upper (``"high"``) bound (inf -> 1e6)."""
-    import jax.numpy as jnp
-
-    out = {}
-    for p in model.parameters:
-        v = p.bounds[0] if which == "low" else p.bounds[1]
-        out[p.name] = jnp.full(p.shape, min(v, 1e6), dtype=float)
-    return out
 
 
 def random_params(model, rng: np.random.Generator) -> dict:
