@@ -21,6 +21,22 @@ space of the transforms (the log-Jacobian is added), so bounds are never walls;
 chains are reported in natural units. The log-probability is jitted and vectorised
 over walkers; data-only geometry is computed once.
 
+At-bound check: a parameter scalar with two finite bounds is flagged when its posterior
+is piled against one of them. Each sample is mapped to its place ``t`` in [0, 1]
+between the bounds, in the coordinate where the prior is uniform (linear for
+``identity``/``logit``, ``log(x/low)/log(high/low)`` for ``log``), so the rule does not
+depend on the parameter's units. With ``d`` the gap between the bound and the 2.5%
+(lower bound) or 97.5% (upper bound) quantile of ``t``, and ``w`` the width of the
+95% interval of ``t``, the scalar is flagged when ``d < AT_BOUND_SPAN`` (0.01: within
+1% of the span) and ``d <= AT_BOUND_WIDTH * w`` (0.05: the interval reaches the bound
+instead of sitting tightly beside it). For scale: ``d/w`` is 0.014 for a half-normal
+posterior against the bound, 0.026 for one flat like the prior up to some cut ``a``
+(flagged once ``a`` is under 40% of the span, since ``d`` = 0.025 ``a``), and 0.05
+for a Gaussian whose 2.5% quantile is 0.2 sigma from the bound; a narrow posterior
+well resolved just inside a bound (``d`` small, ``w`` far smaller) is not flagged.
+Half-infinite ranges have no span and are not checked. Quantiles at a bound show the
+prior's truncation, not the data: report such intervals as limits.
+
 What the uncertainty means: the spread of parameters compatible with the subsample
 under this noise model. With model error (real materials) neighbouring residuals are
 correlated and the posterior is too narrow; read it as a lower bound.
@@ -50,10 +66,18 @@ from brdffit.result import FitResult
 
 NOISE_MODELS = ("constant", "multiplicative", "additive")
 LOG_SIGMA_BOUNDS = (-30.0, 10.0)
+AT_BOUND_SPAN = 0.01
+"""At-bound check: largest gap to the bound, as a share of the span (prior coordinate)."""
+AT_BOUND_WIDTH = 0.05
+"""At-bound check: largest gap to the bound, as a share of the 95% interval's width."""
 
 
 class ChainTooShortWarning(UserWarning):
     """The chain is shorter than the asked multiple of its autocorrelation time."""
+
+
+class PosteriorAtBoundWarning(UserWarning):
+    """Posterior mass is piled against a parameter bound (module docstring: at-bound check)."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -65,7 +89,9 @@ class Posterior:
     natural units; ``log_prob`` (steps, walkers); ``acceptance_fraction`` (walkers,);
     ``autocorr_time`` (dim,) integrated autocorrelation times in steps, measured after
     ``burn``; ``burn``; ``n_subsample`` samples the likelihood used; ``stuck_walkers``
-    indices of walkers that barely moved; ``wall_time`` (s); ``warnings``.
+    indices of walkers that barely moved; ``at_bound`` (label, bound) pairs of the
+    scalars whose posterior is piled against that bound (natural units; module
+    docstring); ``wall_time`` (s); ``warnings``.
     """
 
     model: str
@@ -80,6 +106,7 @@ class Posterior:
     burn: int
     n_subsample: int
     stuck_walkers: tuple[int, ...]
+    at_bound: tuple[tuple[str, float], ...]
     wall_time: float
     warnings: tuple[str, ...]
 
@@ -142,9 +169,10 @@ class Posterior:
         ]
         rhat = self.split_rhat()
         for i, (lab, qs) in enumerate(self.quantiles().items()):
+            flag = "".join(f"  at bound {b:g}" for name, b in self.at_bound if name == lab)
             lines.append(
                 f"    {lab:<14} {qs[1]:>12.6g} {qs[0]:>12.6g} {qs[2]:>12.6g} "
-                f"{self.autocorr_time[i]:>8.1f} {self.ess[i]:>8.0f} {rhat[i]:>7.3f}"
+                f"{self.autocorr_time[i]:>8.1f} {self.ess[i]:>8.0f} {rhat[i]:>7.3f}{flag}"
             )
         lines += [f"[[Warning]] {w}" for w in self.warnings]
         return "\n".join(lines)
@@ -167,6 +195,7 @@ class Posterior:
             "split_rhat": self.split_rhat().tolist(),
             "acceptance_fraction": float(np.mean(self.acceptance_fraction)),
             "stuck_walkers": list(self.stuck_walkers),
+            "at_bound": [[lab, b] for lab, b in self.at_bound],
             "wall_time": self.wall_time,
             "warnings": list(self.warnings),
         }
@@ -355,16 +384,26 @@ def sample(
     tau = emcee.autocorr.integrated_time(chain_u[burn:], tol=0)
     acc = np.asarray(sampler.acceptance_fraction)
     stuck = tuple(int(i) for i in np.flatnonzero(acc < 0.2 * np.median(acc)))
-    notes = []
+    at_bound = _at_bound(layout, chain[burn:])
+    notes: list[tuple[str, type[UserWarning]]] = []
     if n_steps - burn < min_autocorr_multiple * np.max(tau):
-        notes.append(
+        text = (
             f"chain of {n_steps - burn} kept steps is shorter than {min_autocorr_multiple:g} "
             f"autocorrelation times (max tau {np.max(tau):.1f}); estimates are unreliable"
         )
+        notes.append((text, ChainTooShortWarning))
     if stuck:
-        notes.append(f"{len(stuck)} stuck walkers (acceptance < 0.2 x median): {list(stuck)}")
-    for w in notes:
-        warnings.warn(w, ChainTooShortWarning if "shorter" in w else UserWarning, stacklevel=2)
+        text = f"{len(stuck)} stuck walkers (acceptance < 0.2 x median): {list(stuck)}"
+        notes.append((text, UserWarning))
+    if at_bound:
+        where = ", ".join(f"{lab} at {b:g}" for lab, b in at_bound)
+        text = (
+            f"posterior piled against a bound: {where}; the interval there is set by the "
+            "bound (prior), not the data"
+        )
+        notes.append((text, PosteriorAtBoundWarning))
+    for text, category in notes:
+        warnings.warn(text, category, stacklevel=2)
     labels = tuple(layout.labels()) + ("log_sigma",)
     return Posterior(
         model=model.name,
@@ -379,9 +418,48 @@ def sample(
         burn=burn,
         n_subsample=prep.n,
         stuck_walkers=stuck,
+        at_bound=at_bound,
         wall_time=time.perf_counter() - t0,
-        warnings=tuple(notes),
+        warnings=tuple(text for text, _ in notes),
     )
+
+
+def _bound_coordinate(p: Parameter, x: np.ndarray) -> np.ndarray | None:
+    """Natural ``x`` -> place in [0, 1] between ``p``'s bounds, in the prior's uniform coordinate.
+
+    Linear for ``identity``/``logit``, logarithmic for ``log``; None for a half-infinite range.
+    """
+    lo, hi = p.bounds
+    if not (math.isfinite(lo) and math.isfinite(hi)):
+        return None
+    if p.transform == "log":
+        return np.log(np.maximum(x, lo) / lo) / math.log(hi / lo)
+    return (x - lo) / (hi - lo)
+
+
+def _piled(gap: float, width: float) -> bool:
+    """At-bound rule (module docstring): near on the span's scale and on the posterior's."""
+    return bool(gap < AT_BOUND_SPAN and gap <= AT_BOUND_WIDTH * width)
+
+
+def _at_bound(layout: ParameterLayout, kept: np.ndarray) -> tuple[tuple[str, float], ...]:
+    """(label, bound) of every free scalar piled against a bound (module docstring).
+
+    ``kept`` is the post-burn chain (steps, walkers, dim) in natural units.
+    """
+    out = []
+    labels, i = layout.labels(), 0
+    for p in layout.free:
+        for j in range(p.size):
+            t = _bound_coordinate(p, kept[..., i + j].ravel())
+            if t is not None:
+                q_lo, q_hi = (float(q) for q in np.quantile(t, [0.025, 0.975]))
+                if _piled(q_lo, q_hi - q_lo):
+                    out.append((labels[i + j], float(p.bounds[0])))
+                if _piled(1.0 - q_hi, q_hi - q_lo):
+                    out.append((labels[i + j], float(p.bounds[1])))
+        i += p.size
+    return tuple(out)
 
 
 def _to_natural(layout: ParameterLayout, chain_u: np.ndarray) -> np.ndarray:

@@ -9,7 +9,7 @@ import pytest
 
 from brdffit import ChainTooShortError, fit, models, sample, synthesize
 from brdffit.errors import ParameterError
-from brdffit.sample import ChainTooShortWarning
+from brdffit.sample import ChainTooShortWarning, PosteriorAtBoundWarning
 
 TRUTH = {"kd": [0.1, 0.2, 0.3], "f0": [0.9, 0.6, 0.3], "alpha": 0.15}
 
@@ -88,6 +88,48 @@ def test_diagnostics_shapes_and_short_chain_warning():
     assert err.value.estimate.shape == (4,)
     # Natural units inside the bounds, whatever the walkers did in unconstrained space.
     assert np.all((post.chain[..., :3] > 0) & (post.chain[..., :3] < 1))
+
+
+def _lambert_posterior(kd: list[float], init: list[float], seed: int = 0):
+    """Short lambert posterior on 500 random directions with 5% log-normal noise."""
+    m = models.get("lambert")
+    data = synthesize(m, {"kd": kd}, grid="random", n=500, noise_mult=0.05, seed=seed)
+    return sample(
+        m,
+        data,
+        n_steps=600,
+        n_walkers=16,
+        progress=False,
+        init={"kd": init},
+        noise="multiplicative",
+        seed=seed,
+    )
+
+
+@pytest.mark.parametrize(
+    ("red", "start", "bound"),
+    [(1.0, 0.99, 1.0), (0.0, 1e-4, 0.0)],
+    ids=["upper", "lower"],
+)
+def test_at_bound_warning_names_the_scalar_and_bound(red, start, bound):
+    # The red albedo's truth sits on a bound: its posterior is truncated there.
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ChainTooShortWarning)
+        with pytest.warns(PosteriorAtBoundWarning, match=rf"kd\[r\] at {bound:g}\b"):
+            post = _lambert_posterior([red, 0.4, 0.6], [start, 0.4, 0.6])
+    assert post.at_bound == (("kd[r]", bound),)
+    assert post.to_dict()["at_bound"] == [["kd[r]", bound]]
+    assert f"at bound {bound:g}" in post.summary()
+    assert any("piled against a bound" in w for w in post.warnings)
+
+
+def test_no_at_bound_warning_for_a_resolved_value_just_inside_a_bound():
+    # kd[r] = 0.003 is within 1% of the span of 0, but resolved to +-0.5%: not piled.
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ChainTooShortWarning)  # any other warning: error
+        post = _lambert_posterior([0.003, 0.4, 0.6], [0.003, 0.4, 0.6])
+    assert post.at_bound == () and post.to_dict()["at_bound"] == []
+    assert "at bound" not in post.summary()
 
 
 def test_corner_plot_and_bad_arguments():
