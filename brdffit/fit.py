@@ -23,6 +23,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 
 import equinox as eqx
 import jax
@@ -58,20 +59,233 @@ def _merge(free: tuple[Parameter, ...], x: jax.Array, frozen: Params) -> Params:
 
 
 @eqx.filter_jit
-def _solve(model, free, metric, solver, u0, prep, frozen, active, max_steps):
-    """LM in unconstrained space; scalars with ``active == False`` stay at ``u0``."""
+def _solve(model, free, metric, robust, solver, u0, prep, frozen, active, scale, rscale, max_steps):
+    """LM in unconstrained space; scalars with ``active == False`` stay at ``u0``.
+
+    The residuals are multiplied by ``rscale`` (see :func:`_residual_scale`).
+    """
 
     def fn(u, args):
-        prep, frozen = args
+        prep, frozen, scale, rscale = args
         u = jnp.where(active, u, u0)
-        return metrics_mod.residuals(
-            metric, model.evaluate(_natural(free, u, frozen), prep.g), prep
-        )
+        r = metrics_mod.residuals(metric, model.evaluate(_natural(free, u, frozen), prep.g), prep)
+        return rscale * metrics_mod.robust_residuals(r, robust, scale)
 
-    sol = optx.least_squares(fn, solver, u0, args=(prep, frozen), max_steps=max_steps, throw=False)
+    args = (prep, frozen, scale, rscale)
+    sol = optx.least_squares(fn, solver, u0, args=args, max_steps=max_steps, throw=False)
     u = jnp.where(active, sol.value, u0)
     f = model.evaluate(_natural(free, u, frozen), prep.g)
     return u, sol.result, sol.stats["num_steps"], metrics_mod.loss(metric, f, prep)
+
+
+@eqx.filter_jit
+def _inward_gradient(model, free, metric, robust, u, prep, frozen, scale):
+    """Gradient of ``0.5 sum rho(r)^2`` with respect to the unconstrained ``u``."""
+
+    def cost(u):
+        r = metrics_mod.residuals(metric, model.evaluate(_natural(free, u, frozen), prep.g), prep)
+        r = metrics_mod.robust_residuals(r, robust, scale)
+        return 0.5 * jnp.sum(r * r)
+
+    return jax.grad(cost)(u)
+
+
+@eqx.filter_jit
+def _residual_scale(model, free, metric, robust, u, prep, frozen, scale, active):
+    """``1 / sqrt(TAU max_j (J^T J)_jj)`` over the active columns at ``u`` (1 if degenerate).
+
+    optimistix's LM starts with damping ``lambda = 1`` whatever the size of ``J^T J``;
+    on a metric whose residuals are ~1e-3 (Ngan's RMS) that is a thousand times the
+    curvature, so each descent first spends ~10 steps growing its trust region.
+    Scaling the residuals (the minimiser is unchanged) starts it at ``TAU`` times the
+    largest curvature, Marquardt's and MINPACK's choice.
+    """
+
+    def fn(u):
+        r = metrics_mod.residuals(metric, model.evaluate(_natural(free, u, frozen), prep.g), prep)
+        return metrics_mod.robust_residuals(r, robust, scale)
+
+    j = jax.jacfwd(fn)(u) * active[None, :]
+    top = jnp.max(jnp.sum(j * j, axis=0))
+    ok = jnp.isfinite(top) & (top > 0)
+    return jnp.where(ok, 1.0 / jnp.sqrt(_TAU * jnp.where(ok, top, 1.0)), 1.0)
+
+
+@eqx.filter_jit
+def _cost(model, free, metric, robust, u, prep, frozen, scale):
+    """``0.5 sum rho(r)^2`` at the unconstrained ``u`` (what LM minimises)."""
+    r = metrics_mod.residuals(metric, model.evaluate(_natural(free, u, frozen), prep.g), prep)
+    r = metrics_mod.robust_residuals(r, robust, scale)
+    return 0.5 * jnp.sum(r * r)
+
+
+@eqx.filter_jit
+def _plain_residuals(model, free, metric, u, prep, frozen):
+    f = model.evaluate(_natural(free, u, frozen), prep.g)
+    return metrics_mod.residuals(metric, f, prep)
+
+
+_TAU = 1e-3  # initial LM damping relative to the largest diagonal entry of J^T J
+_STALL = 1e-9  # relative loss decrease over a chunk below which a descent has converged
+_CHUNK = 8  # LM steps between two looks for parameters saturated at a bound
+_FINISH_CHUNK = 4  # the same when finishing on all samples from the coarse optimum
+_PIN_U = 40.0  # |u| of a pinned scalar: sigmoid(40) is 1 - 4e-18, the bound itself
+_PROBE_U = 8.0  # |u| where a pinned scalar is probed for a gradient pointing inward
+
+
+@dataclass(frozen=True)
+class _Problem:
+    """One least-squares problem: model, free layout, metric, robust loss and solver."""
+
+    model: AbstractModel
+    layout: ParameterLayout
+    metric: metrics_mod.Metric
+    solver: optx.AbstractLeastSquaresSolver
+    frozen: Params
+    robust: str | None = None
+    scale: float = 1.0
+
+    def with_robust(self, robust: str | None, scale: float) -> _Problem:
+        return _Problem(
+            self.model, self.layout, self.metric, self.solver, self.frozen, robust, scale
+        )
+
+    def solve(self, u0, prep, active: np.ndarray, max_steps: int, rscale=1.0):
+        return _solve(
+            self.model, self.layout.free, self.metric, self.robust, self.solver, u0, prep,
+            self.frozen, jnp.asarray(active), jnp.asarray(self.scale), jnp.asarray(rscale),
+            max_steps,
+        )  # fmt: skip
+
+    def residual_scale(self, u, prep, active: np.ndarray) -> jax.Array:
+        return _residual_scale(
+            self.model, self.layout.free, self.metric, self.robust, u, prep, self.frozen,
+            jnp.asarray(self.scale), jnp.asarray(active),
+        )  # fmt: skip
+
+    def descend(
+        self, u0, prep, active: np.ndarray, max_steps: int, chunk: int = _CHUNK
+    ) -> _Descent:
+        """LM in chunks of ``_CHUNK`` steps; a scalar whose transform saturates is pinned.
+
+        Bounded transforms flatten towards a bound, so a parameter whose optimum lies on
+        the bound creeps there by ~1 unit of ``u`` per step while the loss stops moving.
+        Each chunk that ends unfinished pins such scalars (``|u| > 12``) on their bound
+        and the others go on. At the end, a pinned scalar whose loss falls when it is
+        moved back inside (probed at ``|u| = 8``) is released and the descent resumes
+        once: the pin must be a Karush-Kuhn-Tucker point, not an accident of the path.
+        """
+        d = self._chunks(u0, prep, active.copy(), max_steps, 0, chunk)
+        released = self._released(d.u, prep, d.active)
+        if released.any() and d.steps < max_steps:
+            u = jnp.where(jnp.asarray(released), jnp.sign(d.u) * _PROBE_U, d.u)
+            d2 = self._chunks(u, prep, d.active | released, max_steps, d.steps, chunk)
+            if d2.loss <= d.loss * (1 + 1e-12):
+                d = d2
+        return d
+
+    def _chunks(
+        self, u, prep, active: np.ndarray, max_steps: int, steps: int, chunk: int
+    ) -> _Descent:
+        """Chunks of LM until it converges, stagnates or runs out of steps.
+
+        Stagnation counts as convergence: a whole chunk that lowers the loss by less
+        than ``_STALL`` (relative) with nothing newly saturated is at a minimum that
+        LM converges to only linearly (large residuals) or that rounding keeps it from
+        certifying (every step rejected); scipy's ``ftol`` is 1e-8 per step.
+        """
+        bounded = _bounded(self.layout)
+        previous = math.inf
+        rscale = self.residual_scale(u, prep, active)
+        while True:
+            before = np.abs(np.asarray(u))
+            u, res, k, loss = self.solve(u, prep, active, chunk, rscale)
+            steps, loss = steps + int(k), float(loss)
+            if res != optx.RESULTS.nonlinear_max_steps_reached:
+                break
+            sat = bounded & active & (np.abs(np.asarray(u)) > 12.0)
+            if not sat.any() and previous - loss <= _STALL * abs(loss):
+                res = optx.RESULTS.successful
+                break
+            if steps >= max_steps:
+                break
+            if sat.any():
+                u = jnp.where(jnp.asarray(sat), jnp.sign(u) * _PIN_U, u)
+                active = active & ~sat
+            outward = np.abs(np.asarray(u)) > before + 1e-3
+            u, active = self._probe_pins(u, prep, active, bounded & outward)
+            previous = loss
+        return _Descent(u, res, steps, loss, active)
+
+    def _cost(self, u, prep) -> float:
+        free, scale = self.layout.free, jnp.asarray(self.scale)
+        return float(_cost(self.model, free, self.metric, self.robust, u, prep, self.frozen, scale))
+
+    def _probe_pins(self, u, prep, active: np.ndarray, bounded: np.ndarray):
+        """Pin scalars heading for a bound where pinning does not raise the cost.
+
+        ``bounded`` marks the candidates (the caller passes those whose ``|u|`` grew
+        over the last chunk); of those, the ones with ``|u| > 4`` are tried.
+
+        A bounded transform flattens as ``e^-|u|`` towards its bound, so LM approaches a
+        bound optimum at a crawl (hundreds of steps for an albedo going to 0). Jumping
+        to the bound is tried one scalar at a time; :meth:`_released` later undoes any
+        pin that turns out not to be a Karush-Kuhn-Tucker point.
+        """
+        near = active & bounded & (np.abs(np.asarray(u)) > 4.0)
+        if not near.any():
+            return u, active
+        active = active.copy()
+        here = self._cost(u, prep)
+        for i in np.flatnonzero(near):
+            trial = u.at[i].set(jnp.sign(u[i]) * _PIN_U)
+            cost = self._cost(trial, prep)
+            if cost <= here:
+                u, here = trial, cost
+                active[i] = False
+        return u, active
+
+    def _released(self, u, prep, active: np.ndarray) -> np.ndarray:
+        pinned = ~active
+        if not pinned.any():
+            return pinned
+        probe = jnp.where(jnp.asarray(pinned), jnp.sign(u) * _PROBE_U, u)
+        g = np.asarray(
+            _inward_gradient(
+                self.model, self.layout.free, self.metric, self.robust, probe, prep,
+                self.frozen, jnp.asarray(self.scale),
+            )
+        )  # fmt: skip
+        # moving inward lowers u's magnitude: the cost falls inward when g * sign(u) > 0
+        return pinned & (g * np.sign(np.asarray(u)) > 0)
+
+
+@dataclass(frozen=True)
+class _Descent:
+    u: jax.Array
+    result: object
+    steps: int
+    loss: float
+    active: np.ndarray
+
+
+def _bounded(layout: ParameterLayout) -> np.ndarray:
+    """Free scalars with a bounded (saturating) transform."""
+    parts = [
+        np.full(
+            p.size, p.transform == "logit" or (p.transform == "log" and math.isfinite(p.bounds[1]))
+        )
+        for p in layout.free
+    ]
+    return np.concatenate(parts) if parts else np.zeros(0, bool)
+
+
+def _subset(prep: metrics_mod.Prepared, n: int | None) -> metrics_mod.Prepared:
+    """Every k-th kept sample so that at most ``n`` remain (the starts' coarse stage)."""
+    if n is None or prep.n <= 2 * n:
+        return prep
+    idx = jnp.asarray(np.linspace(0, prep.n - 1, n).round().astype(np.int64))
+    return jax.tree.map(lambda a: a[idx], prep)
 
 
 @eqx.filter_jit
@@ -82,9 +296,12 @@ def _all_losses(model, params, preps):
 
 
 @eqx.filter_jit
-def _jacobian(model, free, metric, x, prep, frozen):
+def _jacobian(model, free, metric, robust, x, prep, frozen, scale):
+    """Residuals (robust ones when ``robust``) and their Jacobian in natural parameters."""
+
     def fn(x):
-        return metrics_mod.residuals(metric, model.evaluate(_merge(free, x, frozen), prep.g), prep)
+        r = metrics_mod.residuals(metric, model.evaluate(_merge(free, x, frozen), prep.g), prep)
+        return metrics_mod.robust_residuals(r, robust, scale)
 
     return fn(x), jax.jacfwd(fn)(x)
 
@@ -157,18 +374,30 @@ def _random_start(layout: ParameterLayout, base: Params, rng: np.random.Generato
 
 def _covariance(
     j: np.ndarray, r: np.ndarray, method: str, n_free: int
-) -> tuple[np.ndarray | None, float, str | None]:
-    """Covariance of the free scalars from ``J`` and ``r``; (cov, condition, reason)."""
+) -> tuple[np.ndarray | None, float, str | None, np.ndarray]:
+    """Covariance of the free scalars from ``J`` and ``r``.
+
+    Returns (cov, condition, reason, weak): ``weak`` flags the scalars that carry the
+    near-null directions of the column-scaled ``J^T J`` (eigenvalues below 1e-10 of the
+    largest; a component above 0.3 of the unit eigenvector), i.e. the parameters the
+    data do not identify on their own.
+    """
+    weak = np.zeros(j.shape[1], bool)
+    if n_free == 0:
+        return None, float("nan"), "no free parameter", weak
     jtj = j.T @ j
     d = np.sqrt(np.diag(jtj))
-    if n_free == 0:
-        return None, float("nan"), "no free parameter"
-    if np.any(d == 0) or not np.all(np.isfinite(jtj)):
-        return None, float("inf"), "a parameter does not change the residuals (J^T J singular)"
+    if not np.all(np.isfinite(jtj)):
+        return None, float("inf"), "J^T J is not finite", weak
+    if np.any(d == 0):
+        return None, float("inf"), "a parameter does not change the residuals", d == 0
     scaled = jtj / np.outer(d, d)
-    cond = float(np.linalg.cond(scaled))
+    ev, vec = np.linalg.eigh(scaled)
+    cond = float(ev[-1] / ev[0]) if ev[0] > 0 else float("inf")
+    small = ev < 1e-10 * ev[-1]
+    weak = np.any(np.abs(vec[:, small]) > 0.3, axis=1) if small.any() else weak
     if not np.isfinite(cond) or cond > 1e15:
-        return None, cond, f"J^T J is singular to working precision (condition {cond:.3g})"
+        return None, cond, f"J^T J is singular to working precision (condition {cond:.3g})", weak
     bread = np.linalg.inv(scaled) / np.outer(d, d)
     if method == "classic":
         dof = max(j.shape[0] - n_free, 1)
@@ -176,7 +405,7 @@ def _covariance(
     else:
         meat = (j * (r**2)[:, None]).T @ j
         cov = bread @ meat @ bread
-    return 0.5 * (cov + cov.T), cond, None
+    return 0.5 * (cov + cov.T), cond, None, weak
 
 
 def fit(
@@ -193,6 +422,9 @@ def fit(
     rtol: float = 1e-10,
     atol: float = 1e-12,
     errors: str = "sandwich",
+    robust: str | None = None,
+    robust_scale: float | None = None,
+    coarse: int | None = 50_000,
     throw: bool = True,
 ) -> FitResult:
     """Fit ``model`` to ``data`` by Levenberg-Marquardt on the residuals of ``metric``.
@@ -206,8 +438,16 @@ def fit(
       parameters leave the fit and get zero standard error.
     - ``cut_deg``: zenith-angle cut for both directions, degrees (``None``: none).
     - ``n_restarts``: seeded random starts in addition to the first one.
-    - ``max_steps``, ``rtol``, ``atol``: LM limits and tolerances (optimistix).
+    - ``max_steps``, ``rtol``, ``atol``: LM limits (per descent) and tolerances.
     - ``errors``: ``"sandwich"`` or ``"classic"`` (module docstring).
+    - ``robust``: ``None``, ``"huber"`` or ``"cauchy"``: a robust loss on the metric's
+      residuals (:func:`brdffit.metrics.robust_residuals`) against outliers. The fit
+      first converges without it; ``robust_scale`` (residual units) defaults to the
+      tuning constant (1.345 Huber, 2.385 Cauchy) times 1.4826 MAD of those residuals.
+      The reported ``loss`` stays the metric's own value.
+    - ``coarse``: the starts run on every k-th sample, at most ``coarse`` of them, and
+      the best one is then finished on all samples (``None``: starts on all samples).
+      Only data with more than twice ``coarse`` samples are thinned.
     - ``throw``: raise :class:`FitError` (carrying the result) if the fit did not converge.
 
     Returns a :class:`FitResult`; a non-finite or unfinished fit is never marked converged.
@@ -216,6 +456,12 @@ def fit(
     m = metrics_mod.get_metric(metric)
     if errors not in ("sandwich", "classic"):
         raise ParameterError(f"errors={errors!r}: use 'sandwich' or 'classic'")
+    if robust is not None and robust not in metrics_mod.ROBUST_TUNING:
+        raise ParameterError(f"robust={robust!r}: use None, 'huber' or 'cauchy'")
+    if robust_scale is not None and not (math.isfinite(robust_scale) and robust_scale > 0):
+        raise ParameterError(f"robust_scale={robust_scale!r}: must be a positive number")
+    if coarse is not None and coarse < 100:
+        raise ParameterError(f"coarse={coarse!r}: use None or at least 100 samples")
     start = _start_params(model, init)
     layout = ParameterLayout.build(model.parameters, _freeze_map(model, freeze, start))
     frozen = {k: jnp.asarray(v, jnp.float64) for k, v in layout.frozen.items()}
@@ -226,112 +472,122 @@ def fit(
     # MERL-size data (1.07 s -> 0.27 s at 2.7M residuals). The damping keeps the system
     # positive definite; it squares the condition number, which float64 absorbs here.
     solver = optx.LevenbergMarquardt(rtol=rtol, atol=atol, linear_solver=lx.Normal(lx.Cholesky()))
+    problem = _Problem(model, layout, m, solver, frozen)
     rng = np.random.default_rng(seed)
 
-    best = None
+    # Stage 1: every start on the (possibly thinned) samples; the lowest loss wins.
+    small = _subset(prep, coarse)
     first = {**start, **frozen}
     starts = [first] + [_random_start(layout, first, rng) for _ in range(n_restarts)]
-    everywhere = jnp.ones(layout.size, bool)
+    everywhere = np.ones(layout.size, bool)
+    best, best_start, coarse_steps = None, first, 0
     for s in starts:
-        s = _with_linear_start(model, m, layout, s, prep)
-        u0 = layout.unconstrained(s)
-        out = _solve(model, layout.free, m, solver, u0, prep, frozen, everywhere, max_steps)
-        loss = float(out[3])
-        cand = (loss if math.isfinite(loss) else math.inf, out[0], out[1], int(out[2]), s)
-        if best is None or cand[0] < best[0]:
-            best = cand
-    loss, u, res, steps, s0 = best
-    pinned = np.zeros(layout.size, bool)
-    if res == optx.RESULTS.nonlinear_max_steps_reached:
-        # Active set: scalars that ran into a bound (sigmoid saturated) are pinned
-        # there and LM finishes the others; the best fit then lies on the bound.
-        pinned = _saturated(layout, np.asarray(u))
-        if pinned.any():
-            u_pin = jnp.where(pinned, jnp.sign(u) * 40.0, u)
-            out = _solve(
-                model, layout.free, m, solver, u_pin, prep, frozen, jnp.asarray(~pinned), max_steps
-            )
-            if math.isfinite(float(out[3])) and float(out[3]) <= loss * (1 + 1e-9):
-                loss, u, res, steps = float(out[3]), out[0], out[1], steps + int(out[2])
-
-    params = {k: np.asarray(v) for k, v in _natural(layout.free, u, frozen).items()}
-    finite = math.isfinite(loss) and all(np.all(np.isfinite(v)) for v in params.values())
-    if not finite:
-        status = Status.NONFINITE
-    elif res == optx.RESULTS.successful:
-        status = Status.CONVERGED
-    elif res == optx.RESULTS.nonlinear_max_steps_reached:
-        status = Status.MAX_STEPS
+        s = _with_linear_start(model, m, layout, s, small)
+        d = problem.descend(layout.unconstrained(s), small, everywhere, max_steps)
+        coarse_steps += d.steps
+        if best is None or (d.loss if math.isfinite(d.loss) else math.inf) < best.loss:
+            best, best_start = d, s
+    # Stage 2: finish the winner on every sample (its pins carried over, re-checked).
+    if small is not prep:
+        best = problem.descend(best.u, prep, best.active, max_steps, chunk=_FINISH_CHUNK)
     else:
-        status = Status.SOLVER_FAILED
+        coarse_steps = 0
+    # Stage 3: the robust loss, from the plain optimum.
+    scale = None
+    if robust is not None:
+        scale = robust_scale or _robust_scale(problem, best.u, prep, robust)
+        problem = problem.with_robust(robust, scale)
+        d = problem.descend(best.u, prep, best.active, max_steps)
+        best = _Descent(d.u, d.result, best.steps + d.steps, d.loss, d.active)
 
+    params = {k: np.asarray(v) for k, v in _natural(layout.free, best.u, frozen).items()}
+    finite = math.isfinite(best.loss) and all(np.all(np.isfinite(v)) for v in params.values())
     result = _assemble(
-        model,
-        m,
-        layout,
+        problem,
         params,
-        s0,
+        best_start,
         preps,
-        status,
-        steps,
+        _status(best.result, finite),
+        best.steps,
         len(starts),
         errors,
         cut_deg,
         data.source,
         t0,
-        pinned,
+        ~best.active,
+        coarse=(small.n if small is not prep else 0, coarse_steps),
+        robust_scale=scale,
     )
     if throw and not result.converged:
-        raise FitError(f"fit of {model.name} to {data.source}: {status.value}", result)
+        raise FitError(f"fit of {model.name} to {data.source}: {result.status.value}", result)
     return result
 
 
-def _saturated(layout: ParameterLayout, u: np.ndarray) -> np.ndarray:
-    """Free scalars whose bounded transform is saturated (|u| > 12: within 6e-6 of a bound)."""
-    bounded = np.concatenate(
-        [
-            np.full(
-                p.size,
-                p.transform == "logit" or (p.transform == "log" and math.isfinite(p.bounds[1])),
-            )
-            for p in layout.free
-        ]
-        or [np.zeros(0, bool)]
-    )
-    return bounded & (np.abs(u) > 12.0)
+def _status(res, finite: bool) -> Status:
+    if not finite:
+        return Status.NONFINITE
+    if res == optx.RESULTS.successful:
+        return Status.CONVERGED
+    if res == optx.RESULTS.nonlinear_max_steps_reached:
+        return Status.MAX_STEPS
+    return Status.SOLVER_FAILED
+
+
+def _robust_scale(problem: _Problem, u, prep, kind: str) -> float:
+    """Tuning constant x 1.4826 MAD of the plain residuals at ``u`` (residual units)."""
+    free, frozen = problem.layout.free, problem.frozen
+    r = np.asarray(_plain_residuals(problem.model, free, problem.metric, u, prep, frozen))
+    mad = 1.4826 * float(np.median(np.abs(r - np.median(r))))
+    spread = mad if mad > 0 else float(np.sqrt(np.mean(r * r)))
+    return metrics_mod.ROBUST_TUNING[kind] * max(spread, 1e-300)
 
 
 def _assemble(
-    model,
-    m,
-    layout,
-    params,
-    start,
-    preps,
-    status,
-    steps,
-    n_starts,
-    errors,
-    cut,
-    source,
-    t0,
-    pinned,
-):
+    problem: _Problem,
+    params: dict[str, np.ndarray],
+    start: dict,
+    preps: dict,
+    status: Status,
+    steps: int,
+    n_starts: int,
+    errors: str,
+    cut: float | None,
+    source: str,
+    t0: float,
+    pinned: np.ndarray,
+    *,
+    coarse: tuple[int, int],
+    robust_scale: float | None,
+) -> FitResult:
     """Uncertainties, information criteria, every metric, flags -> FitResult.
 
     Scalars ``pinned`` at a bound by the active-set pass are left out of the
-    covariance; their standard error is NaN.
+    covariance; their standard error is NaN. With a robust loss the covariance uses
+    the robust residuals and their Jacobian (the Gauss-Newton form of the M-estimator
+    sandwich); AIC, BIC and ``cost`` always use the metric's plain residuals.
     """
+    model, layout, m, frozen = problem.model, problem.layout, problem.metric, problem.frozen
     x = layout.join({k: jnp.asarray(v) for k, v in params.items()})
-    frozen = dict(layout.frozen)
     prep = preps[m.name]
     cov = corr = stderr = None
     cond, reason = float("nan"), None
+    weak_names: list[str] = []
     r = np.zeros(0)
     if status is not Status.NONFINITE:
-        r, j = (np.asarray(a) for a in _jacobian(model, layout.free, m, x, prep, frozen))
+        scale = jnp.asarray(problem.scale)
+        rr, j = (
+            np.asarray(a)
+            for a in _jacobian(model, layout.free, m, problem.robust, x, prep, frozen, scale)
+        )
+        if problem.robust is None:
+            r = rr
+        else:
+            u = layout.unconstrained({k: jnp.asarray(v) for k, v in params.items()})
+            r = np.asarray(_plain_residuals(model, layout.free, m, u, prep, frozen))
         act = ~pinned
-        cov_a, cond, reason = _covariance(j[:, act], r, errors, int(act.sum()))
+        cov_a, cond, reason, weak = _covariance(j[:, act], rr, errors, int(act.sum()))
+        labels_act = [lab for lab, a in zip(layout.labels(), act, strict=True) if a]
+        weak_names = [lab for lab, w in zip(labels_act, weak, strict=True) if w]
         if cov_a is not None:
             cov = np.full((layout.size, layout.size), np.nan)
             cov[np.ix_(act, act)] = cov_a
@@ -351,25 +607,19 @@ def _assemble(
     aic = n_data * math.log(rss / n_data) + 2 * k if r.size else float("nan")
     bic = n_data * math.log(rss / n_data) + k * math.log(n_data) if r.size else float("nan")
     losses = {k: float(v) for k, v in _all_losses(model, params, preps).items()}
-    labels = layout.labels()
-    at_bound = tuple(
-        p.name
-        for p in layout.free
-        if np.any(np.isclose(params[p.name], p.bounds[0], rtol=1e-6, atol=1e-9))
-        or np.any(np.isclose(params[p.name], p.bounds[1], rtol=1e-6, atol=1e-9))
-        or any(pinned[i] for i, lab in enumerate(labels) if lab.split("[")[0] == p.name)
-    )
+    at_bound = _at_bound(layout, params, pinned)
     warnings = []
     if at_bound:
         warnings.append(
             f"parameters at a bound: {', '.join(at_bound)}; the best fit lies on the bound, "
             "their errors are unreliable (NaN where pinned)"
         )
+    named = f" ({', '.join(weak_names)})" if weak_names else ""
     if reason and status is not Status.NONFINITE:
-        warnings.append(f"no uncertainties: {reason}")
+        warnings.append(f"no uncertainties: {reason}; not identified{named or ' (none named)'}")
     elif math.isfinite(cond) and cond > 1e10:
         warnings.append(
-            f"J^T J is ill-conditioned ({cond:.3g}): some parameters are poorly identified"
+            f"J^T J is ill-conditioned ({cond:.3g}): poorly identified{named or ' (none named)'}"
         )
     return FitResult(
         model=model.name,
@@ -401,4 +651,23 @@ def _assemble(
         source=source,
         at_bound=at_bound,
         warnings=tuple(warnings),
+        not_identified=tuple(weak_names),
+        coarse_samples=coarse[0],
+        coarse_steps=coarse[1],
+        robust=problem.robust,
+        robust_scale=robust_scale,
+    )
+
+
+def _at_bound(
+    layout: ParameterLayout, params: dict[str, np.ndarray], pinned: np.ndarray
+) -> tuple[str, ...]:
+    """Names of free parameters within 1e-6 of a bound or pinned there."""
+    labels = layout.labels()
+    return tuple(
+        p.name
+        for p in layout.free
+        if np.any(np.isclose(params[p.name], p.bounds[0], rtol=1e-6, atol=1e-9))
+        or np.any(np.isclose(params[p.name], p.bounds[1], rtol=1e-6, atol=1e-9))
+        or any(pinned[i] for i, lab in enumerate(labels) if lab.split("[")[0] == p.name)
     )

@@ -189,6 +189,35 @@ def residuals(metric: Metric, f_model: Array, prep: Prepared) -> Array:
     return (root_w * e).ravel()
 
 
+ROBUST_TUNING = {"huber": 1.345, "cauchy": 2.385}
+"""Tuning constants (in units of the residuals' robust sigma) for 95% efficiency."""
+
+
+def robust_residuals(r: Array, kind: str | None, scale: Array) -> Array:
+    """Residuals whose squares are a robust loss of ``r`` with ``scale`` (residual units).
+
+    ``None`` returns ``r``. ``"huber"``: ``rho(r) = r^2`` for ``|r| <= c`` and
+    ``2 c |r| - c^2`` beyond; ``"cauchy"``: ``rho(r) = c^2 ln(1 + (r / c)^2)``. The
+    returned ``sign(r) sqrt(rho(r))`` keeps LM a least-squares solver; both forms are
+    smooth at 0 and equal ``r`` to first order there.
+    """
+    if kind is None:
+        return r
+    x = r / scale
+    if kind == "huber":
+        a = jnp.abs(x)
+        big = a > 1.0
+        root = jnp.sqrt(jnp.where(big, 2.0 * a - 1.0, 1.0))
+        return jnp.where(big, jnp.sign(r) * scale * root, r)
+    if kind == "cauchy":
+        # x * sqrt(ln(1 + x^2) / x^2), written with log1p and safe at x = 0
+        x2 = x * x
+        safe = jnp.where(x2 > 1e-12, x2, 1.0)
+        factor = jnp.where(x2 > 1e-12, jnp.sqrt(jnp.log1p(safe) / safe), 1.0 - 0.25 * x2)
+        return r * factor
+    raise ParameterError(f"robust={kind!r}: use None, 'huber' or 'cauchy'")
+
+
 def loss(metric: Metric, f_model: Array, prep: Prepared) -> Array:
     """The exact scalar loss of the metric (see the module table)."""
     e = differences(metric, f_model, prep)

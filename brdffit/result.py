@@ -40,7 +40,12 @@ class FitResult:
     LM minimised), ``n_samples``, ``n_data`` (residuals = 3 x samples), ``n_free``,
     ``aic``, ``bic``, ``condition_number`` (of the column-scaled ``J^T J``),
     ``status``, ``n_steps``, ``n_starts``, ``wall_time`` (s), ``cut_deg``, ``source``,
-    ``at_bound`` (names of parameters within 1e-6 of a bound), ``warnings``.
+    ``at_bound`` (names of parameters within 1e-6 of a bound), ``warnings``,
+    ``not_identified`` (labels of the free scalars on near-null directions of
+    ``J^T J``), ``coarse_samples`` / ``coarse_steps`` (the starts' thinned stage: its
+    sample count, 0 when the starts ran on all samples, and its steps summed over
+    starts; ``n_steps`` counts the winner's steps on all samples), ``robust`` /
+    ``robust_scale`` (the robust loss and its scale in residual units, or None).
     """
 
     model: str
@@ -72,6 +77,11 @@ class FitResult:
     source: str
     at_bound: tuple[str, ...] = ()
     warnings: tuple[str, ...] = field(default_factory=tuple)
+    not_identified: tuple[str, ...] = ()
+    coarse_samples: int = 0
+    coarse_steps: int = 0
+    robust: str | None = None
+    robust_scale: float | None = None
 
     @property
     def converged(self) -> bool:
@@ -113,6 +123,11 @@ class FitResult:
             "source": self.source,
             "at_bound": list(self.at_bound),
             "warnings": list(self.warnings),
+            "not_identified": list(self.not_identified),
+            "coarse_samples": self.coarse_samples,
+            "coarse_steps": self.coarse_steps,
+            "robust": self.robust,
+            "robust_scale": self.robust_scale,
         }
 
     def to_json(self, indent: int | None = 2) -> str:
@@ -159,7 +174,17 @@ class FitResult:
             source=d.get("source", "unknown"),
             at_bound=tuple(d.get("at_bound", ())),
             warnings=tuple(d.get("warnings", ())),
+            not_identified=tuple(d.get("not_identified", ())),
+            coarse_samples=int(d.get("coarse_samples", 0)),
+            coarse_steps=int(d.get("coarse_steps", 0)),
+            robust=d.get("robust"),
+            robust_scale=d.get("robust_scale"),
         )
+
+    def _coarse_text(self) -> str:
+        if not self.coarse_samples:
+            return ""
+        return f"; starts on {self.coarse_samples} samples, {self.coarse_steps} steps"
 
     def report(self, correl_min: float = 0.3) -> str:
         """Human-readable report in the spirit of lmfit's ``fit_report``."""
@@ -170,9 +195,11 @@ class FitResult:
             f"[[Fit]] {self.model}({opts}) on {self.source}",
             f"    metric           {self.metric} = {self.loss:.6g}   ({cut})",
             f"    other metrics    {others}",
-            f"    noise model      residuals independent; errors by {self.errors_method}",
+            f"    noise model      residuals independent; errors by {self.errors_method}"
+            + (f"; {self.robust} loss, scale {self.robust_scale:.3g}" if self.robust else ""),
             f"    status           {self.status.value}",
-            f"    steps            {self.n_steps} (best of {self.n_starts} starts)",
+            f"    steps            {self.n_steps} "
+            f"(best of {self.n_starts} starts{self._coarse_text()})",
             f"    wall time        {self.wall_time:.3f} s",
             f"    samples          {self.n_samples} ({self.n_data} residuals), "
             f"{self.n_free} free parameters",

@@ -10,6 +10,7 @@ import pytest
 from brdffit import FitError, FitResult, Status, fit, models, synthesize
 from brdffit.errors import ParameterError
 from brdffit.measurements import Measurements
+from tests.cases import CASES
 
 TRUTH = {"kd": [0.1, 0.2, 0.3], "f0": [0.9, 0.6, 0.3], "alpha": 0.15}
 GRID = (5, 5, 5)  # 11,664 MERL bin centres: the MERL grid at a fifth of its resolution
@@ -96,3 +97,63 @@ def test_json_round_trip_and_required_keys(walter):
     assert back.to_dict() == r.to_dict()
     assert set(r.losses) == {"ngan", "low_e1", "low_e2", "log1p_l1"}
     assert r.losses["low_e2"] == r.loss
+
+
+def _with_outliers(data: Measurements, share: float, factor: float, seed: int) -> Measurements:
+    rng = np.random.default_rng(seed)
+    values = data.values.copy()
+    hit = rng.choice(len(values), int(share * len(values)), replace=False)
+    values[hit] *= factor
+    return Measurements.from_directions(data.wi, data.wo, values, weights=data.weights)
+
+
+@pytest.mark.parametrize("robust", ["huber", "cauchy"])
+def test_robust_loss_shrugs_off_outliers_the_plain_fit_does_not(walter, robust):
+    clean = synthesize(walter, TRUTH, stride=(9, 9, 9), noise_mult=0.02, seed=4)
+    data = _with_outliers(clean, 0.01, 100.0, seed=5)
+    plain = fit(walter, data, "low_e2", n_restarts=0)
+    rob = fit(walter, data, "low_e2", n_restarts=0, robust=robust)
+    assert rob.converged and rob.robust == robust and rob.robust_scale > 0
+
+    def worst(r):  # largest relative error over every parameter scalar
+        return max(np.max(np.abs(r.params[k] / np.asarray(v) - 1)) for k, v in TRUTH.items())
+
+    print(robust, "largest relative error: plain", worst(plain), "robust", worst(rob))
+    assert worst(rob) < 0.01 and worst(plain) > 5 * worst(rob)
+    assert f"{robust} loss" in rob.report()
+    assert FitResult.from_dict(json.loads(rob.to_json())).robust_scale == rob.robust_scale
+    with pytest.raises(ParameterError, match="robust"):
+        fit(walter, data, robust="l1")
+
+
+def test_coarse_starts_then_all_samples_reach_the_same_optimum(walter):
+    data = synthesize(walter, TRUTH, stride=(9, 9, 9), noise_mult=0.05, seed=3)
+    full = fit(walter, data, "low_e2", coarse=None)
+    thin = fit(walter, data, "low_e2", coarse=500)
+    assert full.coarse_samples == 0 and thin.coarse_samples == 500 and thin.coarse_steps > 0
+    assert thin.n_samples == full.n_samples and thin.converged
+    assert thin.loss == pytest.approx(full.loss, rel=1e-9)
+    for name in TRUTH:  # both stop when a chunk lowers the loss < 1e-9: ~1e-4 in parameters
+        np.testing.assert_allclose(thin.params[name], full.params[name], rtol=1e-3)
+    assert "starts on 500 samples" in thin.report()
+
+
+def test_an_albedo_whose_optimum_is_zero_is_pinned_without_a_crawl(walter):
+    truth = {**TRUTH, "kd": [0.0, 0.2, 0.3]}
+    data = synthesize(walter, truth, stride=GRID)
+    for metric in ("low_e2", "ngan"):
+        r = fit(walter, data, metric, n_restarts=0)
+        assert r.converged and "kd" in r.at_bound and r.n_steps <= 64, (metric, r.n_steps)
+        np.testing.assert_allclose(r.params["kd"], truth["kd"], atol=1e-9)
+        np.testing.assert_allclose(r.params["alpha"], 0.15, rtol=1e-6)
+
+
+def test_unidentified_parameters_are_named():
+    case = next(c for c in CASES if c.model == "disney" and c.not_identifiable)
+    model, params = case.build()
+    data = synthesize(model, params, stride=(9, 9, 9))
+    r = fit(model, data, "low_e2", init=params, n_restarts=0, throw=False)
+    print(r.not_identified, r.warnings)
+    named = {label.split("[")[0] for label in r.not_identified}
+    assert named & set(case.not_identifiable), (named, case.not_identifiable)
+    assert any(n in w for w in r.warnings for n in named)
