@@ -95,6 +95,8 @@ def cmd_fit(args) -> None:
         cut_deg=args.cut,
         n_restarts=args.restarts,
         seed=args.seed,
+        robust=args.robust,
+        robust_scale=args.robust_scale,
         throw=False,
     )
     print(r.report())
@@ -245,6 +247,10 @@ def build_parser() -> argparse.ArgumentParser:
     data_args(s)
     fit_args(s)
     s.add_argument("--restarts", type=int, default=2)
+    s.add_argument(
+        "--robust", choices=["huber", "cauchy"], help="robust loss on the residuals (outliers)"
+    )
+    s.add_argument("--robust-scale", type=float, help="its scale, residual units (default: MAD)")
     s.add_argument("--json", metavar="OUT", help="write the result as JSON")
     s.set_defaults(func=cmd_fit)
     s = sub.add_parser("sample", help="emcee posterior of one model, started at the LM fit")
