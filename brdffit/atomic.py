@@ -67,3 +67,9 @@ def save_figure(fig: object, path: str | os.PathLike[str], **kwargs: object) -> 
     fmt = Path(path).suffix.lstrip(".") or "png"
     fig.savefig(buf, format=fmt, **kwargs)
     write_atomic(path, [buf.getvalue()])
+
+
+def remove_temporaries(folder: str | os.PathLike[str]) -> None:
+    """Delete, below ``folder``, the temporary files a killed :func:`write_atomic` left."""
+    for p in Path(folder).rglob(".*.tmp"):
+        p.unlink(missing_ok=True)

@@ -20,6 +20,7 @@ where the classic form was 9-12x too narrow in DESIGN's experiment.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from collections.abc import Mapping, Sequence
@@ -58,6 +59,12 @@ def _merge(free: tuple[Parameter, ...], x: jax.Array, frozen: Params) -> Params:
     return out
 
 
+def _objective_residuals(model, free, metric, robust, u, prep, frozen, scale):
+    """The residual vector LM sees at the unconstrained ``u`` (robust ones when ``robust``)."""
+    r = metrics_mod.residuals(metric, model.evaluate(_natural(free, u, frozen), prep.g), prep)
+    return metrics_mod.robust_residuals(r, robust, scale)
+
+
 @eqx.filter_jit
 def _solve(model, free, metric, robust, solver, u0, prep, frozen, active, scale, rscale, max_steps):
     """LM in unconstrained space; scalars with ``active == False`` stay at ``u0``.
@@ -68,8 +75,7 @@ def _solve(model, free, metric, robust, solver, u0, prep, frozen, active, scale,
     def fn(u, args):
         prep, frozen, scale, rscale = args
         u = jnp.where(active, u, u0)
-        r = metrics_mod.residuals(metric, model.evaluate(_natural(free, u, frozen), prep.g), prep)
-        return rscale * metrics_mod.robust_residuals(r, robust, scale)
+        return rscale * _objective_residuals(model, free, metric, robust, u, prep, frozen, scale)
 
     args = (prep, frozen, scale, rscale)
     sol = optx.least_squares(fn, solver, u0, args=args, max_steps=max_steps, throw=False)
@@ -78,16 +84,19 @@ def _solve(model, free, metric, robust, solver, u0, prep, frozen, active, scale,
     return u, sol.result, sol.stats["num_steps"], metrics_mod.loss(metric, f, prep)
 
 
+def _cost_at(model, free, metric, robust, u, prep, frozen, scale):
+    """``0.5 sum rho(r)^2`` at the unconstrained ``u`` (what LM minimises)."""
+    f = model.evaluate(_natural(free, u, frozen), prep.g)
+    return metrics_mod.objective(metric, f, prep, robust, scale)
+
+
+_cost = eqx.filter_jit(_cost_at)
+
+
 @eqx.filter_jit
-def _inward_gradient(model, free, metric, robust, u, prep, frozen, scale):
-    """Gradient of ``0.5 sum rho(r)^2`` with respect to the unconstrained ``u``."""
-
-    def cost(u):
-        r = metrics_mod.residuals(metric, model.evaluate(_natural(free, u, frozen), prep.g), prep)
-        r = metrics_mod.robust_residuals(r, robust, scale)
-        return 0.5 * jnp.sum(r * r)
-
-    return jax.grad(cost)(u)
+def _cost_gradient(model, free, metric, robust, u, prep, frozen, scale):
+    """Gradient of :func:`_cost_at` with respect to ``u``."""
+    return jax.grad(lambda v: _cost_at(model, free, metric, robust, v, prep, frozen, scale))(u)
 
 
 @eqx.filter_jit
@@ -102,8 +111,7 @@ def _residual_scale(model, free, metric, robust, u, prep, frozen, scale, active)
     """
 
     def fn(u):
-        r = metrics_mod.residuals(metric, model.evaluate(_natural(free, u, frozen), prep.g), prep)
-        return metrics_mod.robust_residuals(r, robust, scale)
+        return _objective_residuals(model, free, metric, robust, u, prep, frozen, scale)
 
     j = jax.jacfwd(fn)(u) * active[None, :]
     top = jnp.max(jnp.sum(j * j, axis=0))
@@ -112,17 +120,8 @@ def _residual_scale(model, free, metric, robust, u, prep, frozen, scale, active)
 
 
 @eqx.filter_jit
-def _cost(model, free, metric, robust, u, prep, frozen, scale):
-    """``0.5 sum rho(r)^2`` at the unconstrained ``u`` (what LM minimises)."""
-    r = metrics_mod.residuals(metric, model.evaluate(_natural(free, u, frozen), prep.g), prep)
-    r = metrics_mod.robust_residuals(r, robust, scale)
-    return 0.5 * jnp.sum(r * r)
-
-
-@eqx.filter_jit
 def _plain_residuals(model, free, metric, u, prep, frozen):
-    f = model.evaluate(_natural(free, u, frozen), prep.g)
-    return metrics_mod.residuals(metric, f, prep)
+    return _objective_residuals(model, free, metric, None, u, prep, frozen, 1.0)
 
 
 _TAU = 1e-3  # initial LM damping relative to the largest diagonal entry of J^T J
@@ -146,9 +145,7 @@ class _Problem:
     scale: float = 1.0
 
     def with_robust(self, robust: str | None, scale: float) -> _Problem:
-        return _Problem(
-            self.model, self.layout, self.metric, self.solver, self.frozen, robust, scale
-        )
+        return dataclasses.replace(self, robust=robust, scale=scale)
 
     def solve(self, u0, prep, active: np.ndarray, max_steps: int, rscale=1.0):
         return _solve(
@@ -251,7 +248,7 @@ class _Problem:
             return pinned
         probe = jnp.where(jnp.asarray(pinned), jnp.sign(u) * _PROBE_U, u)
         g = np.asarray(
-            _inward_gradient(
+            _cost_gradient(
                 self.model, self.layout.free, self.metric, self.robust, probe, prep,
                 self.frozen, jnp.asarray(self.scale),
             )
@@ -270,13 +267,8 @@ class _Descent:
 
 
 def _bounded(layout: ParameterLayout) -> np.ndarray:
-    """Free scalars with a bounded (saturating) transform."""
-    parts = [
-        np.full(
-            p.size, p.transform == "logit" or (p.transform == "log" and math.isfinite(p.bounds[1]))
-        )
-        for p in layout.free
-    ]
+    """Free scalars whose transform saturates at a bound."""
+    parts = [np.full(p.size, p.saturates) for p in layout.free]
     return np.concatenate(parts) if parts else np.zeros(0, bool)
 
 

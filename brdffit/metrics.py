@@ -193,7 +193,7 @@ ROBUST_TUNING = {"huber": 1.345, "cauchy": 2.385}
 """Tuning constants (in units of the residuals' robust sigma) for 95% efficiency."""
 
 
-def robust_residuals(r: Array, kind: str | None, scale: Array) -> Array:
+def robust_residuals(r: Array, kind: str | None, scale: Array | float) -> Array:
     """Residuals whose squares are a robust loss of ``r`` with ``scale`` (residual units).
 
     ``None`` returns ``r``. ``"huber"``: ``rho(r) = r^2`` for ``|r| <= c`` and
@@ -216,6 +216,18 @@ def robust_residuals(r: Array, kind: str | None, scale: Array) -> Array:
         factor = jnp.where(x2 > 1e-12, jnp.sqrt(jnp.log1p(safe) / safe), 1.0 - 0.25 * x2)
         return r * factor
     raise ParameterError(f"robust={kind!r}: use None, 'huber' or 'cauchy'")
+
+
+def objective(
+    metric: Metric,
+    f_model: Array,
+    prep: Prepared,
+    robust: str | None = None,
+    scale: Array | float = 1.0,
+) -> Array:
+    """``0.5 sum rho(r)^2``: what Levenberg-Marquardt minimises (``rho`` the robust loss)."""
+    r = robust_residuals(residuals(metric, f_model, prep), robust, scale)
+    return 0.5 * jnp.sum(r * r)
 
 
 def loss(metric: Metric, f_model: Array, prep: Prepared) -> Array:

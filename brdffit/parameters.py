@@ -69,6 +69,13 @@ class Parameter:
         """Number of scalars in the parameter (1 or 3)."""
         return int(np.prod(self.shape, dtype=int))
 
+    @property
+    def saturates(self) -> bool:
+        """True when the transform flattens onto a finite bound (logit, bounded log)."""
+        return self.transform == "logit" or (
+            self.transform == "log" and math.isfinite(self.bounds[1])
+        )
+
     def default_array(self, dtype: jnp.dtype = jnp.float64) -> jax.Array:
         """The default broadcast to the parameter's shape."""
         return jnp.full(self.shape, self.default, dtype=dtype)

@@ -132,7 +132,7 @@ class FitResult:
 
     def to_json(self, indent: int | None = 2) -> str:
         """The JSON text of :meth:`to_dict` (NaN and Inf written as null)."""
-        return json.dumps(_nan_to_none(self.to_dict()), indent=indent)
+        return json.dumps(nan_to_none(self.to_dict()), indent=indent)
 
     @classmethod
     def from_dict(cls, d: dict) -> FitResult:
@@ -253,11 +253,14 @@ class FitResult:
         return f"<pre>{html.escape(self.report())}</pre>"
 
 
-def _nan_to_none(x: object) -> object:
+def nan_to_none(x: object) -> object:
+    """NaN and Inf -> None, numpy scalars -> Python, recursively (strict JSON)."""
+    if isinstance(x, dict):
+        return {str(k): nan_to_none(v) for k, v in x.items()}
+    if isinstance(x, list | tuple):
+        return [nan_to_none(v) for v in x]
+    if isinstance(x, np.generic):
+        x = x.item()
     if isinstance(x, float) and not math.isfinite(x):
         return None
-    if isinstance(x, dict):
-        return {k: _nan_to_none(v) for k, v in x.items()}
-    if isinstance(x, list):
-        return [_nan_to_none(v) for v in x]
     return x

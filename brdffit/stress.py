@@ -43,6 +43,7 @@ atomically: an interrupted run resumes and skips finished cases.
 from __future__ import annotations
 
 import concurrent.futures as cf
+import hashlib
 import json
 import math
 import multiprocessing
@@ -54,7 +55,18 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import equinox as eqx
+import jax.numpy as jnp
 import numpy as np
+
+from brdffit import enable_compilation_cache, metrics
+from brdffit import models as registry
+from brdffit.atomic import remove_temporaries, write_text
+from brdffit.fit import fit
+from brdffit.geometry import halfdiff_to_io
+from brdffit.measurements import Measurements
+from brdffit.metrics import get_metric, prepare
+from brdffit.result import nan_to_none
 
 N_STARTS = 20
 N_SAMPLES = 2000
@@ -304,7 +316,6 @@ NOT_IDENTIFIABLE: dict[tuple[str, str], str] = {}
 def fitter_version() -> str:
     """Short hash of the fitting code (``fit.py``, ``metrics.py``, ``parameters.py``):
     results from different fitters are not comparable."""
-    import hashlib
 
     h = hashlib.sha256()
     for name in ("fit.py", "metrics.py", "parameters.py"):
@@ -367,7 +378,6 @@ def _set_dynamic_range(model, truth: dict, name: str, ratio: float) -> tuple[dic
     largest channel of what the diffuse parameter adds. Three fixed-point passes
     (exact for an additive diffuse term). Returns the truth and the ratio reached.
     """
-    import jax.numpy as jnp
 
     p = model.parameter(name)
     out = dict(truth)
@@ -397,17 +407,13 @@ class CaseSpec:
     seed: int
 
     def build(self):
-        from brdffit import models
 
-        return models.get(self.model_name, **self.options)
+        return registry.get(self.model_name, **self.options)
 
 
 def case_spec(model_name: str, regime: Regime) -> CaseSpec:
     """The truth of (``model_name``, ``regime``): baseline jittered by the case seed, then
     the regime's changes. Raises ``ValueError`` if the regime does not apply."""
-    import jax.numpy as jnp
-
-    from brdffit import models
 
     reason = not_applicable(model_name, regime)
     if reason:
@@ -422,7 +428,7 @@ def case_spec(model_name: str, regime: Regime) -> CaseSpec:
         options, base = dict(roles.two_lobes[0]), dict(roles.two_lobes[1])
         rough_name = None
         notes.append(f"{options}")
-    model = models.get(model_name, **options)
+    model = registry.get(model_name, **options)
     truth = {k: np.asarray(v, float) for k, v in model.defaults().items()}
     for k, v in base.items():
         truth[k] = np.broadcast_to(np.asarray(v, float), model.parameter(k).shape).copy()
@@ -492,7 +498,6 @@ def sample_directions(
     docstring) and ``"grazing"`` (each direction with probability 0.8 from
     ``cos theta`` uniform in [0, 0.5], else uniform on the hemisphere).
     """
-    from brdffit.geometry import halfdiff_to_io
 
     cmin = math.cos(math.radians(cut_deg)) if cut_deg is not None else 0.0
     kept_i, kept_o, kept_w, drawn = [], [], [], 0
@@ -555,9 +560,6 @@ def make_data(spec: CaseSpec, regime: Regime, n_samples: int = N_SAMPLES):
     Exactly ``n_samples`` cells are valid and inside the regime's cut; with ``missing``
     the data hold ``n_samples / (1 - missing)`` cells, the others marked invalid.
     """
-    import jax.numpy as jnp
-
-    from brdffit.measurements import Measurements
 
     model = spec.build()
     rng = np.random.default_rng([spec.seed, 0])
@@ -599,67 +601,32 @@ def random_start(model, freeze: dict, rng: np.random.Generator) -> dict:
     """A random natural point: ``u ~ U(-START_U, START_U)`` in each free parameter's
     optimiser space (identity parameters: uniform in ``[-START_U, START_U]`` clipped to
     their bounds)."""
-    import jax.numpy as jnp
 
     out = {}
     for p in model.parameters:
         if p.name in freeze:
             continue
         u = rng.uniform(-START_U, START_U, p.shape)
-        if p.transform == "identity":
-            x = np.clip(u, p.bounds[0], p.bounds[1])
-        else:
-            x = np.asarray(p.to_natural(jnp.asarray(u)), float)
-            x = np.clip(x, p.bounds[0], p.bounds[1])
+        x = np.clip(np.asarray(p.to_natural(jnp.asarray(u)), float), p.bounds[0], p.bounds[1])
         out[p.name] = x
     return out
 
 
-def _objective_fn():
-    import equinox as eqx
-    import jax.numpy as jnp
-
-    from brdffit import metrics
-
-    @eqx.filter_jit
-    def objective(model, metric, robust, params, prep, scale):
-        f = model.evaluate(params, prep.g)
-        r = metrics.robust_residuals(metrics.residuals(metric, f, prep), robust, scale)
-        return 0.5 * jnp.sum(r * r)
-
-    @eqx.filter_jit
-    def zero_objective(metric, robust, prep, scale):
-        f = jnp.zeros(prep.values.shape, prep.values.dtype)
-        r = metrics.robust_residuals(metrics.residuals(metric, f, prep), robust, scale)
-        return 0.5 * jnp.sum(r * r)
-
-    return objective, zero_objective
-
-
-_OBJECTIVE: list = []
+@eqx.filter_jit
+def _objective(model, metric, robust, params, prep, scale):
+    return metrics.objective(metric, model.evaluate(params, prep.g), prep, robust, scale)
 
 
 def objective(model, metric: str, robust: str | None, scale: float, params: dict, prep) -> float:
     """``0.5 sum rho(r)^2`` of the metric's residuals at ``params`` (natural units)."""
-    import jax.numpy as jnp
-
-    from brdffit.metrics import get_metric
-
-    if not _OBJECTIVE:
-        _OBJECTIVE.extend(_objective_fn())
     p = {k: jnp.asarray(v, jnp.float64) for k, v in params.items()}
-    return float(_OBJECTIVE[0](model, get_metric(metric), robust, p, prep, jnp.asarray(scale)))
+    return float(_objective(model, get_metric(metric), robust, p, prep, jnp.asarray(scale)))
 
 
 def zero_objective(metric: str, robust: str | None, scale: float, prep) -> float:
     """The objective of the zero BRDF: the data's own energy (the tolerance floor's scale)."""
-    import jax.numpy as jnp
-
-    from brdffit.metrics import get_metric
-
-    if not _OBJECTIVE:
-        _OBJECTIVE.extend(_objective_fn())
-    return float(_OBJECTIVE[1](get_metric(metric), robust, prep, jnp.asarray(scale)))
+    zero = jnp.zeros_like(prep.values)
+    return float(metrics.objective(get_metric(metric), zero, prep, robust, jnp.asarray(scale)))
 
 
 def _finite_params(params: dict) -> bool:
@@ -670,7 +637,6 @@ def _one_fit(
     model, data, metric: str, regime: Regime, spec: CaseSpec, init: dict, scale, max_steps: int
 ):
     """Run one fit; returns (record dict, FitResult or None)."""
-    from brdffit.fit import fit
 
     t0 = time.perf_counter()
     try:
@@ -738,7 +704,6 @@ def _classify(rec: dict, best: float, tol: float) -> tuple[bool, str | None]:
 
 def _u_distance(model, freeze, a: dict, b: dict) -> float:
     """Largest difference of the free scalars of ``a`` and ``b`` in the optimiser space."""
-    import jax.numpy as jnp
 
     d = 0.0
     for p in model.parameters:
@@ -759,7 +724,6 @@ def run_case(
     max_steps: int = MAX_STEPS,
 ) -> dict:
     """Run one case (reference fit + ``n_starts`` random starts); returns its JSON dict."""
-    from brdffit.metrics import get_metric, prepare
 
     regime = REGIMES[regime] if isinstance(regime, str) else regime
     out: dict = {
@@ -824,9 +788,7 @@ def score(case: dict, model=None) -> dict:
     from ``case["model"]`` and ``case["options"]`` when not given.
     """
     if model is None:
-        from brdffit import models
-
-        model = models.get(case["model"], **case.get("options", {}))
+        model = registry.get(case["model"], **case.get("options", {}))
     ref, starts, j0 = case["reference"], case["starts"], case["zero_objective"]
     freeze = set(case.get("frozen", ()))
     fits = [ref, *starts]
@@ -892,25 +854,11 @@ def case_path(out: str | os.PathLike[str], model: str, metric: str, regime: str)
     return Path(out) / f"{model}__{metric}__{regime}.json"
 
 
-def _clean(x: object) -> object:
-    """NaN and Inf -> None, numpy scalars -> Python, recursively (strict JSON)."""
-    if isinstance(x, dict):
-        return {str(k): _clean(v) for k, v in x.items()}
-    if isinstance(x, list | tuple):
-        return [_clean(v) for v in x]
-    if isinstance(x, np.generic):
-        x = x.item()
-    if isinstance(x, float) and not math.isfinite(x):
-        return None
-    return x
-
-
 def write_case(path: str | os.PathLike[str], result: dict) -> None:
     """Write one case's JSON atomically (NaN and Inf as null)."""
-    from brdffit.atomic import write_text
 
     Path(path).parent.mkdir(parents=True, exist_ok=True)
-    write_text(path, json.dumps(_clean(result), indent=1, allow_nan=False))
+    write_text(path, json.dumps(nan_to_none(result), indent=1, allow_nan=False))
 
 
 def is_finished(path: Path) -> bool:
@@ -975,12 +923,6 @@ def _run_group(
     return done
 
 
-def _init_worker() -> None:
-    from brdffit import enable_compilation_cache
-
-    enable_compilation_cache()
-
-
 def run_suite(
     out: str | os.PathLike[str],
     models: Sequence[str],
@@ -999,8 +941,6 @@ def run_suite(
     them). ``jobs`` > 1 runs such groups in worker processes started with ``spawn``
     (JAX is not fork-safe). Returns the number of cases run.
     """
-    from brdffit import models as registry
-    from brdffit.metrics import get_metric
 
     for m in models:
         registry.get(m)
@@ -1012,8 +952,7 @@ def run_suite(
     if unknown:
         raise ValueError(f"unknown regime(s) {unknown}; known: {', '.join(REGIMES)}")
     Path(out).mkdir(parents=True, exist_ok=True)
-    for p in Path(out).glob(".*.tmp"):
-        p.unlink(missing_ok=True)
+    remove_temporaries(out)
     groups = [
         (mo, me, [r for r in regimes if not is_finished(case_path(out, mo, me, r))])
         for mo in models
@@ -1033,7 +972,7 @@ def run_suite(
             _run_group(mo, me, rs, str(out), n_starts, n_samples, max_steps, report)
         return n
     ctx = multiprocessing.get_context("spawn")
-    with cf.ProcessPoolExecutor(jobs, mp_context=ctx, initializer=_init_worker) as pool:
+    with cf.ProcessPoolExecutor(jobs, mp_context=ctx, initializer=enable_compilation_cache) as pool:
         futures = {
             pool.submit(_run_group, mo, me, rs, str(out), n_starts, n_samples, max_steps): (mo, me)
             for mo, me, rs in groups

@@ -34,7 +34,8 @@ from pathlib import Path
 
 import numpy as np
 
-from brdffit.atomic import write_text
+from brdffit import enable_compilation_cache
+from brdffit.atomic import remove_temporaries, write_text
 from brdffit.errors import SweepError
 from brdffit.families import family_of
 
@@ -292,12 +293,6 @@ def _write_manifest(out: Path, materials, models_, metrics, settings: dict) -> d
     return man
 
 
-def _clean_temporaries(out: Path) -> None:
-    """Remove temporary files a killed writer left (``.<name>.json.*.tmp``)."""
-    for p in out.rglob(".*.tmp"):
-        p.unlink(missing_ok=True)
-
-
 def run_sweep(
     out: str | os.PathLike[str],
     materials: Sequence[Material],
@@ -345,7 +340,7 @@ def run_sweep(
     settings["eval_n"] = eval_n
     out.mkdir(parents=True, exist_ok=True)
     _write_manifest(out, materials, models, metrics, settings)
-    _clean_temporaries(out)
+    remove_temporaries(out)
     tasks = [Task(m, mo, me, settings) for m in materials for mo in models for me in metrics]
     todo = [t for t in tasks if not is_finished(t.path(out))]
     left = {m.name: sum(t.material.name == m.name for t in todo) for m in materials}
@@ -385,7 +380,9 @@ def run_sweep(
 
 def _run_parallel(todo: list[Task], out: Path, jobs: int, record) -> None:
     ctx = multiprocessing.get_context("spawn")
-    with cf.ProcessPoolExecutor(max_workers=jobs, mp_context=ctx, initializer=_init) as pool:
+    with cf.ProcessPoolExecutor(
+        max_workers=jobs, mp_context=ctx, initializer=enable_compilation_cache
+    ) as pool:
         futures = {pool.submit(run_task, t, str(out)): t for t in todo}
         try:
             for fut in cf.as_completed(futures):
@@ -403,13 +400,6 @@ def _run_parallel(todo: list[Task], out: Path, jobs: int, record) -> None:
         except BaseException:
             pool.shutdown(wait=False, cancel_futures=True)
             raise
-
-
-def _init() -> None:
-    """Worker start-up: the on-disk XLA cache, so workers share compiled code."""
-    from brdffit import enable_compilation_cache
-
-    enable_compilation_cache()
 
 
 def _progress_bar(total: int, n_materials: int, n_finished: int, enabled: bool):
