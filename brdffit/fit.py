@@ -120,6 +120,20 @@ def _residual_scale(model, free, metric, robust, u, prep, frozen, scale, active)
 
 
 @eqx.filter_jit
+def _gauss_newton_gain(model, free, metric, robust, u, prep, frozen, scale, active):
+    """Cost decrease ``0.5 g^T (J^T J)^+ g`` a full Gauss-Newton step over the active scalars
+    predicts at ``u``: near zero (relative to the cost) only at a stationary point."""
+
+    def fn(u):
+        return _objective_residuals(model, free, metric, robust, u, prep, frozen, scale)
+
+    r = fn(u)
+    j = jax.jacfwd(fn)(u) * active[None, :]
+    g = j.T @ r
+    return 0.5 * g @ jnp.linalg.lstsq(j.T @ j, g)[0]
+
+
+@eqx.filter_jit
 def _plain_residuals(model, free, metric, u, prep, frozen):
     return _objective_residuals(model, free, metric, None, u, prep, frozen, 1.0)
 
@@ -129,7 +143,9 @@ _STALL = 1e-9  # relative loss decrease over a chunk below which a descent has c
 _CHUNK = 8  # LM steps between two looks for parameters saturated at a bound
 _FINISH_CHUNK = 4  # the same when finishing on all samples from the coarse optimum
 _PIN_U = 40.0  # |u| of a pinned scalar: sigmoid(40) is 1 - 4e-18, the bound itself
-_PROBE_U = 8.0  # |u| where a pinned scalar is probed for a gradient pointing inward
+_PROBE_U = 12.0  # |u| where a pinned scalar is probed for a gradient pointing inward
+_RESUME_U = 8.0  # |u| a released scalar resumes from
+_DAMP_UP = 1e-2  # residual scale factor (damping x 1e4) after a chunk that went nowhere
 
 
 @dataclass(frozen=True)
@@ -168,17 +184,21 @@ class _Problem:
         Bounded transforms flatten towards a bound, so a parameter whose optimum lies on
         the bound creeps there by ~1 unit of ``u`` per step while the loss stops moving.
         Each chunk that ends unfinished pins such scalars (``|u| > 12``) on their bound
-        and the others go on. At the end, a pinned scalar whose loss falls when it is
-        moved back inside (probed at ``|u| = 8``) is released and the descent resumes
-        once: the pin must be a Karush-Kuhn-Tucker point, not an accident of the path.
+        and the others go on. At the end, a pinned scalar whose cost falls when it is
+        moved back inside (probed at ``|u| = 12``, 6e-6 of the span from the bound) is
+        released and the descent resumes, as long as that lowers the loss: a pin must be
+        a Karush-Kuhn-Tucker point, not an accident of the path.
         """
         d = self._chunks(u0, prep, active.copy(), max_steps, 0, chunk)
-        released = self._released(d.u, prep, d.active)
-        if released.any() and d.steps < max_steps:
-            u = jnp.where(jnp.asarray(released), jnp.sign(d.u) * _PROBE_U, d.u)
+        while d.steps < max_steps:
+            released = self._released(d.u, prep, d.active)
+            if not released.any():
+                break
+            u = jnp.where(jnp.asarray(released), jnp.sign(d.u) * _RESUME_U, d.u)
             d2 = self._chunks(u, prep, d.active | released, max_steps, d.steps, chunk)
-            if d2.loss <= d.loss * (1 + 1e-12):
-                d = d2
+            if not d2.loss < d.loss * (1 - 1e-12):
+                break  # the released scalars went back to their bound: keep the pins
+            d = d2
         return d
 
     def _chunks(
@@ -186,14 +206,18 @@ class _Problem:
     ) -> _Descent:
         """Chunks of LM until it converges, stagnates or runs out of steps.
 
-        Stagnation counts as convergence: a whole chunk that lowers the loss by less
-        than ``_STALL`` (relative) with nothing newly saturated is at a minimum that
-        LM converges to only linearly (large residuals) or that rounding keeps it from
-        certifying (every step rejected); scipy's ``ftol`` is 1e-8 per step.
+        A whole chunk that lowers the loss by less than ``_STALL`` (relative) with nothing
+        newly saturated either sits at a minimum that LM converges to only linearly
+        (large residuals) or that rounding keeps it from certifying, or it went nowhere
+        because each chunk restarts LM's damping and every step was rejected. The
+        Gauss-Newton gain tells them apart: below ``_STALL`` times the cost the descent
+        has converged (scipy's ``ftol`` is 1e-8 per step); otherwise the next chunk
+        starts with the damping raised by ``1 / _DAMP_UP^2``.
         """
         bounded = _bounded(self.layout)
         previous = math.inf
         rscale = self.residual_scale(u, prep, active)
+        floor = 1e-15 * self._cost(u, prep)  # a zero-residual fit's cost is rounding
         while True:
             before = np.abs(np.asarray(u))
             u, res, k, loss = self.solve(u, prep, active, chunk, rscale)
@@ -202,8 +226,10 @@ class _Problem:
                 break
             sat = bounded & active & (np.abs(np.asarray(u)) > 12.0)
             if not sat.any() and previous - loss <= _STALL * abs(loss):
-                res = optx.RESULTS.successful
-                break
+                if self._gain(u, prep, active) <= _STALL * max(self._cost(u, prep), floor):
+                    res = optx.RESULTS.successful
+                    break
+                rscale = rscale * _DAMP_UP
             if steps >= max_steps:
                 break
             if sat.any():
@@ -217,6 +243,14 @@ class _Problem:
     def _cost(self, u, prep) -> float:
         free, scale = self.layout.free, jnp.asarray(self.scale)
         return float(_cost(self.model, free, self.metric, self.robust, u, prep, self.frozen, scale))
+
+    def _gain(self, u, prep, active: np.ndarray) -> float:
+        return float(
+            _gauss_newton_gain(
+                self.model, self.layout.free, self.metric, self.robust, u, prep, self.frozen,
+                jnp.asarray(self.scale), jnp.asarray(active),
+            )
+        )  # fmt: skip
 
     def _probe_pins(self, u, prep, active: np.ndarray, bounded: np.ndarray):
         """Pin scalars heading for a bound where pinning does not raise the cost.

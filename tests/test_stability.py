@@ -27,7 +27,7 @@ _WRONG_MINIMUM = pytest.mark.xfail(
     "regime",
     [
         pytest.param("baseline", marks=_WRONG_MINIMUM),
-        pytest.param("near_mirror", marks=_WRONG_MINIMUM),
+        "near_mirror",
         "outliers_huber",
         pytest.param("missing_half", marks=_WRONG_MINIMUM),
     ],
