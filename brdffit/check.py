@@ -11,9 +11,7 @@ the rows as a table (:func:`format_table`).
 
 from __future__ import annotations
 
-import csv
 import dataclasses
-import io
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
@@ -23,6 +21,7 @@ import numpy as np
 
 from brdffit.abstract_model import AbstractModel
 from brdffit.errors import ParameterError
+from brdffit.tables import render
 
 DTYPES: dict[str, jnp.dtype] = {"float32": jnp.dtype("float32"), "float64": jnp.dtype("float64")}
 PARAMETER_SETS: tuple[str, ...] = ("defaults", "low", "high")
@@ -243,16 +242,4 @@ def _cells(r: CheckRow) -> list[str]:
 
 def format_table(rows: Sequence[CheckRow], fmt: str = "text") -> str:
     """The rows as a plain-text (aligned), Markdown or CSV table."""
-    body = [_cells(r) for r in rows]
-    if fmt == "csv":
-        buf = io.StringIO()
-        csv.writer(buf, lineterminator="\n").writerows([TABLE_HEAD] + body)
-        return buf.getvalue()
-    if fmt == "markdown":
-        lines = ["| " + " | ".join(TABLE_HEAD) + " |", "|" + "---|" * len(TABLE_HEAD)]
-        return "\n".join(lines + ["| " + " | ".join(b) + " |" for b in body]) + "\n"
-    if fmt != "text":
-        raise ParameterError(f"fmt={fmt!r}: use 'text', 'markdown' or 'csv'")
-    widths = [max(len(x) for x in col) for col in zip(TABLE_HEAD, *body, strict=True)]
-    line = "  ".join(f"{{:<{w}}}" for w in widths)
-    return "\n".join(line.format(*b).rstrip() for b in [TABLE_HEAD] + body) + "\n"
+    return render(TABLE_HEAD, [_cells(r) for r in rows], fmt)

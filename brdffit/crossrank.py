@@ -11,8 +11,6 @@ from :mod:`brdffit.families`.
 
 from __future__ import annotations
 
-import csv
-import io
 import json
 import math
 import os
@@ -25,6 +23,7 @@ import numpy as np
 from brdffit.errors import SweepError
 from brdffit.families import FAMILIES, family_of
 from brdffit.rank import _ranks
+from brdffit.tables import render
 
 
 @dataclass(frozen=True)
@@ -217,15 +216,6 @@ def aggregate(mx: Matrices, *, n_boot: int = 1000, seed: int = 0) -> tuple[Aggre
     return tuple(sorted(rows, key=lambda r: (r.mean_rank, r.model)))
 
 
-def _table(head: list[str], body: list[list[str]], fmt: str) -> str:
-    if fmt == "csv":
-        buf = io.StringIO()
-        csv.writer(buf, lineterminator="\n").writerows([head] + body)
-        return buf.getvalue()
-    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
-    return "\n".join(lines + ["| " + " | ".join(b) + " |" for b in body]) + "\n"
-
-
 def aggregate_table(rows: tuple[AggregateRow, ...], fmt: str = "markdown") -> str:
     """The aggregate ranking as a Markdown (``fmt="markdown"``) or CSV table."""
     if fmt == "csv":
@@ -237,7 +227,7 @@ def aggregate_table(rows: tuple[AggregateRow, ...], fmt: str = "markdown") -> st
             + [str(r.n_materials)]
             for r in rows
         ]
-        return _table(head, body, "csv")
+        return render(head, body, "csv")
     head = ["model", "mean rank [95% CI]", "wins [95% CI]", "median rel. error [95% CI]", "n"]
     body = [
         [
@@ -249,7 +239,7 @@ def aggregate_table(rows: tuple[AggregateRow, ...], fmt: str = "markdown") -> st
         ]
         for r in rows
     ]
-    return _table(head, body, "markdown")
+    return render(head, body, "markdown")
 
 
 def per_material_table(mx: Matrices, fmt: str = "markdown") -> str:
@@ -265,7 +255,7 @@ def per_material_table(mx: Matrices, fmt: str = "markdown") -> str:
                 + [str(mx.rank[i, j]), str(mx.rank_aic[i, j]), str(mx.rank_bic[i, j])]
                 + [f"{mx.rel[i, j]:.4g}"]
             )
-    return _table(head, body, fmt)
+    return render(head, body, fmt)
 
 
 def material_order(mx: Matrices) -> np.ndarray:

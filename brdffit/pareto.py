@@ -15,7 +15,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from brdffit.crossrank import SweepResults, _table, matrices
+from brdffit.crossrank import SweepResults, matrices
+from brdffit.tables import render
 
 
 @dataclass(frozen=True)
@@ -98,7 +99,7 @@ def pareto_table(rows: tuple[ParetoRow, ...], fmt: str = "markdown") -> str:
         + [f"{r.median_eval_ns:.4g}", "*" if r.front_eval else ""]
         for r in rows
     ]
-    return _table(head, body, fmt)
+    return render(head, body, fmt)
 
 
 def pareto_figure(rows: tuple[ParetoRow, ...]):

@@ -11,8 +11,6 @@ column is the number to quote; AIC/BIC order models of similar error by complexi
 
 from __future__ import annotations
 
-import csv
-import io
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -20,6 +18,7 @@ import numpy as np
 
 from brdffit.errors import ParameterError
 from brdffit.result import FitResult
+from brdffit.tables import render
 
 NOTE = (
     "n = residuals (3 x samples); samples with correlated model error make the effective "
@@ -87,19 +86,13 @@ class Ranking:
             ]
             for r in self.rows
         ]
+        table = render(head, body, fmt)
         if fmt == "csv":
-            buf = io.StringIO()
-            csv.writer(buf).writerows([head] + body)
-            return buf.getvalue()
+            return table
         title = f"Ranking by {self.by} on {self.source} (metric {self.metric}, n = {self.n_data})"
         if fmt == "markdown":
-            lines = [f"**{title}**", "", "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
-            lines += ["| " + " | ".join(b) + " |" for b in body]
-            return "\n".join(lines + ["", f"_{NOTE}_"])
-        widths = [max(len(x) for x in col) for col in zip(head, *body, strict=True)]
-        fmt_row = "  ".join(f"{{:<{w}}}" for w in widths)
-        lines = [title, fmt_row.format(*head)] + [fmt_row.format(*b) for b in body]
-        return "\n".join(lines + [NOTE])
+            return f"**{title}**\n\n{table}\n_{NOTE}_"
+        return f"{title}\n{table}{NOTE}"
 
     def to_dict(self) -> dict:
         """JSON-ready form."""

@@ -67,6 +67,7 @@ from brdffit.geometry import halfdiff_to_io
 from brdffit.measurements import Measurements
 from brdffit.metrics import get_metric, prepare
 from brdffit.result import nan_to_none
+from brdffit.tables import render
 
 N_STARTS = 20
 N_SAMPLES = 2000
@@ -1020,7 +1021,7 @@ def format_table(rows: Sequence[dict]) -> str:
     """The Markdown table of case results (:func:`load_results`)."""
     head = ["model", "metric", "regime", "identifiable", "recovery %", "median steps",
             "median time (s)", "cond (ref)", "failures"]  # fmt: skip
-    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    body = []
     for d in rows:
         if not d.get("applicable", False):
             cells = [d["model"], d["metric"], d["regime"], "", "n/a", "", "", "",
@@ -1038,8 +1039,8 @@ def format_table(rows: Sequence[dict]) -> str:
                 "" if cond is None else f"{cond:.1e}",
                 _failures_cell(d),
             ]
-        lines.append("| " + " | ".join(cells) + " |")
-    return "\n".join(lines)
+        body.append(cells)
+    return render(head, body, "markdown").rstrip("\n")
 
 
 def summary(rows: Sequence[dict]) -> str:
