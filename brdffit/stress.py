@@ -372,28 +372,26 @@ def _f_normal(model, params: dict) -> np.ndarray:
     return np.asarray(model.eval(params, z, z), float)[0]
 
 
+def _peak_to_floor(model, truth: dict, name: str) -> float:
+    """Largest channel of ``f(n, n)`` with ``name`` at 0 over the largest channel it adds."""
+    p = model.parameter(name)
+    peak = _f_normal(model, {**truth, name: jnp.zeros(p.shape)})
+    floor = _f_normal(model, truth) - peak
+    return float(np.max(peak) / max(np.max(floor), 1e-300))
+
+
 def _set_dynamic_range(model, truth: dict, name: str, ratio: float) -> tuple[dict, float]:
     """Scale the diffuse parameter ``name`` so that peak / floor = ``ratio`` at ``wi = wo = n``.
 
-    Peak: the largest channel of ``f`` with the diffuse parameter at 0; floor: the
-    largest channel of what the diffuse parameter adds. Three fixed-point passes
-    (exact for an additive diffuse term). Returns the truth and the ratio reached.
+    Three fixed-point passes of :func:`_peak_to_floor` (exact for an additive diffuse
+    term). Returns the truth and the ratio reached.
     """
-
     p = model.parameter(name)
     out = dict(truth)
-    achieved = float("nan")
     for _ in range(3):
-        zero = {**out, name: jnp.zeros(p.shape)}
-        peak = _f_normal(model, zero)
-        floor = _f_normal(model, out) - peak
-        achieved = float(np.max(peak) / max(np.max(floor), 1e-300))
-        scale = achieved / ratio
+        scale = _peak_to_floor(model, out, name) / ratio
         out[name] = jnp.asarray(np.clip(np.asarray(out[name]) * scale, p.bounds[0], p.bounds[1]))
-    zero = {**out, name: jnp.zeros(p.shape)}
-    peak = _f_normal(model, zero)
-    achieved = float(np.max(peak) / max(np.max(_f_normal(model, out) - peak), 1e-300))
-    return out, achieved
+    return out, _peak_to_floor(model, out, name)
 
 
 @dataclass(frozen=True)
@@ -408,7 +406,7 @@ class CaseSpec:
     seed: int
 
     def build(self):
-
+        """The model with the case's options."""
         return registry.get(self.model_name, **self.options)
 
 
