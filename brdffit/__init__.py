@@ -10,8 +10,14 @@ float32 directions.
 """
 
 import os
+from importlib import metadata
 
 import jax
+
+try:
+    __version__ = metadata.version("brdffit")
+except metadata.PackageNotFoundError:  # a source tree that was not installed
+    __version__ = None
 
 jax.config.update("jax_enable_x64", True)
 

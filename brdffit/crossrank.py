@@ -32,7 +32,8 @@ class Record:
 
     ``loss`` is the value of ``metric`` (the one fitted), ``losses`` every metric on
     the same samples; ``wall_time`` in s; ``eval_ns`` ns per sample (``nan`` if not
-    timed); ``status`` the :class:`brdffit.Status` name.
+    timed); ``status`` the :class:`brdffit.Status` name; ``provenance`` a short label
+    of the code and device that computed it (``"unrecorded"`` in older sweeps).
     """
 
     material: str
@@ -48,6 +49,7 @@ class Record:
     status: str
     wall_time: float
     eval_ns: float
+    provenance: str = "unrecorded"
 
 
 @dataclass(frozen=True)
@@ -77,6 +79,16 @@ class SweepResults:
         """Family recorded in the manifest (else from the name)."""
         m = self.manifest["materials"].get(material, {})
         return m.get("family") or family_of(material)
+
+
+def provenance_label(d: dict | None) -> str:
+    """``brdffit 0.1.0 (git f1ea536), jax 0.10.2 on cpu (cpu)`` from a result's provenance."""
+    if not d:
+        return "unrecorded"
+    return (
+        f"brdffit {d.get('brdffit')} (git {d.get('git')}), jax {d.get('jax')} "
+        f"on {d.get('backend')} ({d.get('device')})"
+    )
 
 
 def _num(x: object) -> float:
@@ -111,6 +123,7 @@ def load_sweep(sweep_dir: str | os.PathLike[str]) -> SweepResults:
                 status=str(d.get("status", "")),
                 wall_time=_num(d.get("wall_time")),
                 eval_ns=_num(d.get("eval_ns_per_sample")),
+                provenance=provenance_label(d.get("provenance")),
             )
         )
     return SweepResults(manifest, tuple(records), tuple(errors))

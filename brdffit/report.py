@@ -47,6 +47,7 @@ def _header(res) -> list[str]:
         f"- MERL grid stride {tuple(s['stride'])}, angle cut {cut}, "
         f"{s['n_restarts']} random restarts (seed {s['seed']}), at most {s['max_steps']} LM steps",
         f"- results: {done} of {total} tasks, {unconv} not converged, {len(res.errors)} errors",
+        *_provenance(res),
         "",
         "Ranks are by the metric value per material; unconverged and missing fits rank last. "
         "Relative error is loss / best loss on the material - 1. Intervals are 95% "
@@ -56,6 +57,18 @@ def _header(res) -> list[str]:
         "ns per sample.",
         "",
     ]
+
+
+def _provenance(res) -> list[str]:
+    """Which code and device computed the results; a warning when they are mixed."""
+    counts = Counter(r.provenance for r in res.records)
+    lines = [f"- computed by: {label} ({n} results)" for label, n in sorted(counts.items())]
+    if len(counts) > 1:
+        lines.append(
+            "- **warning**: the results come from more than one code version or device; "
+            "losses and times are not all comparable"
+        )
+    return lines
 
 
 def _errors(res) -> list[str]:

@@ -23,6 +23,7 @@ Workers are processes started with the ``spawn`` method (JAX is not fork-safe);
 from __future__ import annotations
 
 import concurrent.futures as cf
+import functools
 import json
 import multiprocessing
 import os
@@ -205,6 +206,37 @@ def eval_cost(model, params: dict, data, *, n: int = 65536, repeats: int = 3) ->
     return float(best / n * 1e9)
 
 
+@functools.cache
+def provenance() -> dict:
+    """Where a result was computed: brdffit version and git commit, JAX backend, device.
+
+    Results from different fitter versions or devices must not be mixed unknowingly
+    in one report; the commit (``-dirty`` with uncommitted changes) is ``None``
+    outside a git checkout.
+    """
+    import subprocess
+
+    import jax
+
+    import brdffit
+
+    here = Path(brdffit.__file__).resolve().parent
+    try:
+        commit = subprocess.run(
+            ["git", "-C", str(here), "describe", "--always", "--dirty"],
+            capture_output=True, text=True, timeout=10, check=True,
+        ).stdout.strip() or None  # fmt: skip
+    except (OSError, subprocess.SubprocessError):
+        commit = None
+    return {
+        "brdffit": getattr(brdffit, "__version__", None),
+        "git": commit,
+        "jax": jax.__version__,
+        "backend": jax.default_backend(),
+        "device": str(jax.devices()[0].device_kind),
+    }
+
+
 def run_task(task: Task, out: str) -> dict:
     """Fit one task and write its result file atomically; returns a short status dict.
 
@@ -236,6 +268,7 @@ def run_task(task: Task, out: str) -> dict:
             family=task.material.family,
             eval_ns_per_sample=ns,
             eval_n=s["eval_n"],
+            provenance=provenance(),
         )
         path.parent.mkdir(parents=True, exist_ok=True)
         write_text(path, json.dumps(d, indent=1))

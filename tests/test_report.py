@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import re
 import shutil
 
@@ -47,3 +48,17 @@ def test_report_cli(tmp_path, capsys):
     assert main(["report", str(tmp_path / "missing")]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "sweep.json" in err
+
+
+def test_report_names_mixed_code_versions_and_devices(tmp_path):
+    src = make_sweep(tmp_path / "s")
+    text = write_report(src).read_text()
+    assert "computed by: unrecorded" in text and "warning" not in text
+    one = next(src.glob("steel/a__*.json"))
+    d = json.loads(one.read_text())
+    d["provenance"] = {"brdffit": "0.1.0", "git": "abc1234", "jax": "0.11.2",
+                       "backend": "gpu", "device": "NVIDIA H100 80GB HBM3"}  # fmt: skip
+    one.write_text(json.dumps(d))
+    text = write_report(src).read_text()
+    assert "on gpu (NVIDIA H100 80GB HBM3) (1 results)" in text
+    assert "more than one code version or device" in text

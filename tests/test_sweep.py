@@ -60,6 +60,7 @@ def test_killed_sweep_resumes_without_redoing_work(tmp_path):
     assert {p: (p.stat().st_ino, p.stat().st_mtime_ns) for p in before} == stats
     d = json.loads(after[0].read_text())
     assert d["eval_ns_per_sample"] > 0 and d["family"] and d["material"] == after[0].parent.name
+    assert d["provenance"]["backend"] == "cpu" and d["provenance"]["brdffit"]
     man = json.loads((out / "sweep.json").read_text())
     assert len(man["materials"]) == 6 and list(man["models"]) == ["lambert", "walter"]
 
