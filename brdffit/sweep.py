@@ -211,8 +211,8 @@ def provenance() -> dict:
     """Where a result was computed: brdffit version and git commit, JAX backend, device.
 
     Results from different fitter versions or devices must not be mixed unknowingly
-    in one report; the commit (``-dirty`` with uncommitted changes) is ``None``
-    outside a git checkout.
+    in one report; the commit (``-dirty`` with uncommitted changes) is read from git,
+    else from ``$BRDFFIT_GIT_DESCRIBE`` (an installed copy), else ``None``.
     """
     import subprocess
 
@@ -226,8 +226,8 @@ def provenance() -> dict:
             ["git", "-C", str(here), "describe", "--always", "--dirty"],
             capture_output=True, text=True, timeout=10, check=True,
         ).stdout.strip() or None  # fmt: skip
-    except (OSError, subprocess.SubprocessError):
-        commit = None
+    except (OSError, subprocess.SubprocessError):  # an installed copy: the builder may say
+        commit = os.environ.get("BRDFFIT_GIT_DESCRIBE") or None
     return {
         "brdffit": getattr(brdffit, "__version__", None),
         "git": commit,
