@@ -11,7 +11,6 @@ the rows as a table (:func:`format_table`).
 
 from __future__ import annotations
 
-import dataclasses
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
@@ -19,6 +18,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from brdffit import models
 from brdffit.abstract_model import AbstractModel
 from brdffit.errors import ParameterError
 from brdffit.tables import render
@@ -125,16 +125,6 @@ class CheckRow:
         return "; ".join(parts)
 
 
-def model_label(model: AbstractModel) -> str:
-    """``name`` or ``name[k=v,...]`` with the static options that differ from the defaults."""
-    changed = [
-        f"{f.name}={getattr(model, f.name)}"
-        for f in dataclasses.fields(model)
-        if f.default is not dataclasses.MISSING and getattr(model, f.name) != f.default
-    ]
-    return f"{model.name}[{','.join(changed)}]" if changed else model.name
-
-
 def _rows_with(mask: np.ndarray) -> np.ndarray:
     """Samples (rows of an (N, 3) mask) with any channel set."""
     return np.any(mask, axis=-1)
@@ -175,7 +165,7 @@ def check_params(
     grad_bad = _nonfinite_grads(model, p, wi, wo)
     names = extreme_pair_names()
     return CheckRow(
-        model=model_label(model),
+        model=models.label(model),
         params=label,
         dtype=dtype,
         n=int(f.shape[0]),

@@ -1,8 +1,10 @@
 """The ``brdffit`` command line; each subcommand is one library call plus printing.
 
-Bad input (a missing or malformed file, an unknown model, option or metric) prints
-one line on stderr naming the problem and exits with code 2. ``brdffit check`` exits
-with code 1 when a numerical check fails.
+Bad input (a missing or malformed file, an unknown model, option or metric, a bad
+model spec such as ``lafortune[n_lobes=two]``) prints one line on stderr naming the
+problem and exits with code 2. ``brdffit check`` exits with code 1 when a numerical
+check fails. Models are given as specs, ``name`` or ``name[k=v,...]``
+(:func:`brdffit.models.parse_spec`).
 """
 
 from __future__ import annotations
@@ -13,6 +15,11 @@ from collections.abc import Sequence
 
 from brdffit.errors import BrdffitError
 
+MODELS_HELP = (
+    "comma-separated model specs: name or name[k=v,...] for a variant with static options, "
+    "e.g. walter,lafortune[n_lobes=2] (quote it in the shell)"
+)
+
 
 class _Parser(argparse.ArgumentParser):
     def error(self, message: str) -> None:  # one line, exit 2
@@ -20,28 +27,21 @@ class _Parser(argparse.ArgumentParser):
         raise SystemExit(2)
 
 
-def _option_value(text: str) -> object:
-    low = text.lower()
-    if low in ("true", "false"):
-        return low == "true"
-    for cast in (int, float):
-        try:
-            return cast(text)
-        except ValueError:
-            pass
-    return text
-
-
-def _model(name: str, options: Sequence[str] | None):
+def _model(spec: str, options: Sequence[str] | None):
+    """The model of ``spec`` (``name`` or ``name[k=v,...]``) plus ``--option`` KEY=VALUE items."""
     from brdffit import models
 
-    opts = {}
-    for item in options or ():
-        key, sep, value = item.partition("=")
-        if not sep:
-            raise BrdffitError(f"--option {item!r}: expected KEY=VALUE")
-        opts[key] = _option_value(value)
-    return models.get(name, **opts)
+    if options:
+        extra = ",".join(options)
+        spec = f"{spec[:-1]},{extra}]" if spec.endswith("]") else f"{spec}[{extra}]"
+    return models.from_spec(spec)
+
+
+def _specs(text: str) -> list[str]:
+    """``--models`` split at the commas outside brackets."""
+    from brdffit import models
+
+    return models.split_specs(text)
 
 
 def _freeze(items: Sequence[str] | None):
@@ -140,8 +140,7 @@ def cmd_rank(args) -> None:
     from brdffit.rank import rank
 
     data = _load(args)
-    names = [n.strip() for n in args.models.split(",") if n.strip()]
-    models_ = [_model(n, ()) for n in names]  # validate every name before fitting
+    models_ = [_model(n, ()) for n in _specs(args.models)]  # validate every spec before fitting
     results = [
         fit(m, data, args.metric, cut_deg=args.cut, seed=args.seed, throw=False) for m in models_
     ]
@@ -161,7 +160,7 @@ def cmd_sweep(args) -> None:
     s = sweep.run_sweep(
         args.out,
         materials,
-        [n.strip() for n in args.models.split(",") if n.strip()],
+        _specs(args.models),
         [n.strip() for n in args.metrics.split(",") if n.strip()],
         stride=tuple(args.stride),
         cut_deg=args.cut,
@@ -226,7 +225,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     def fit_args(sp, with_model=True):
         if with_model:
-            sp.add_argument("--model", required=True, help="model name (brdffit models)")
+            sp.add_argument(
+                "--model", required=True, help="model name (brdffit models) or name[k=v,...]"
+            )
             sp.add_argument(
                 "--option",
                 action="append",
@@ -269,7 +270,7 @@ def build_parser() -> argparse.ArgumentParser:
     s = sub.add_parser("rank", help="fit several models and rank them")
     data_args(s)
     fit_args(s, with_model=False)
-    s.add_argument("--models", required=True, help="comma-separated model names")
+    s.add_argument("--models", required=True, help=MODELS_HELP)
     s.add_argument("--by", default="loss", choices=["loss", "aic", "bic"])
     s.add_argument("--format", default="text", choices=["text", "markdown", "csv"])
     s.set_defaults(func=cmd_rank)
@@ -280,7 +281,7 @@ def build_parser() -> argparse.ArgumentParser:
     src.add_argument("--nbrdf-dir", metavar="DIR", help="folder of NBRDF *.json + *.h5")
     src.add_argument("--synthetic", type=int, metavar="N", help="N seeded synthetic materials")
     s.add_argument("--materials", help="comma-separated material names to pick")
-    s.add_argument("--models", required=True, help="comma-separated model names")
+    s.add_argument("--models", required=True, help=MODELS_HELP)
     s.add_argument("--metrics", default="low_e2", help="comma-separated metric names")
     _stride_arg(s)
     s.add_argument("--cut", type=float, default=80.0, help="zenith cut, degrees")
@@ -293,7 +294,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("sweep_dir")
     s.set_defaults(func=cmd_report)
     s = sub.add_parser("check", help="values and gradients at extreme directions and bounds")
-    s.add_argument("models", nargs="*", metavar="MODEL", help="model names (default: all)")
+    s.add_argument(
+        "models", nargs="*", metavar="MODEL", help="model names or name[k=v,...] (default: all)"
+    )
     s.add_argument("--dtype", default="both", choices=["float32", "float64", "both"])
     s.add_argument("--format", default="text", choices=["text", "markdown", "csv"])
     s.set_defaults(func=cmd_check)

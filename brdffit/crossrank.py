@@ -1,12 +1,16 @@
 """Ranking of models across many materials, from a sweep folder's JSON files alone.
 
 Per material, the models fitted under one metric are ranked as :func:`brdffit.rank`
-does (by the metric value; AIC and BIC ranks beside it; unconverged and missing fits
-last). Over all materials each model gets its mean rank, its wins (materials where it
-ranks first) and its median relative error ``loss / best loss on that material - 1``
-(converged fits only), each with a 95% percentile bootstrap interval over materials
-(``numpy.random.default_rng(seed)``, materials drawn with replacement). Families come
-from :mod:`brdffit.families`.
+does (by the metric value, losses within a relative :data:`~brdffit.rank.LOSS_RTOL`
+tied and given their average rank; AIC and BIC ranks beside it; unconverged and missing
+fits last). Over all materials each model gets its mean rank, its wins (materials where
+it ranks first; a tie for first is a win for every tied model, so wins can add up to
+more than the number of materials) and its median relative error ``loss / best loss on
+that material - 1`` (converged fits only), each with a 95% percentile bootstrap interval
+over materials (``numpy.random.default_rng(seed)``, materials drawn with replacement).
+A model is named by its label (:func:`brdffit.models.label`), so each variant of a model
+(``lafortune[n_lobes=2]``) ranks as a model of its own. Families come from
+:mod:`brdffit.families`.
 """
 
 from __future__ import annotations
@@ -22,7 +26,7 @@ import numpy as np
 
 from brdffit.errors import SweepError
 from brdffit.families import FAMILIES, family_of
-from brdffit.rank import _ranks
+from brdffit.rank import LOSS_RTOL, rank_text, ranks
 from brdffit.tables import render
 
 
@@ -34,6 +38,8 @@ class Record:
     the same samples; ``wall_time`` in s; ``eval_ns`` ns per sample (``nan`` if not
     timed); ``status`` the :class:`brdffit.Status` name; ``provenance`` a short label
     of the code and device that computed it (``"unrecorded"`` in older sweeps).
+    ``model`` is the label of the fitted variant (``walter``, ``lafortune[n_lobes=2]``),
+    the result file's ``label`` (older sweeps, default options only: its ``model``).
     """
 
     material: str
@@ -67,7 +73,7 @@ class SweepResults:
 
     @property
     def models(self) -> list[str]:
-        """Models of the manifest, in its order."""
+        """Model labels of the manifest, in its order."""
         return list(self.manifest["models"])
 
     @property
@@ -96,7 +102,7 @@ def _num(x: object) -> float:
 
 
 def load_sweep(sweep_dir: str | os.PathLike[str]) -> SweepResults:
-    """Read ``sweep.json`` and every ``<material>/<model>__<metric>[.error].json``."""
+    """Read ``sweep.json`` and every ``<material>/<label>__<metric>[.error].json``."""
     root = Path(sweep_dir)
     try:
         manifest = json.loads((root / "sweep.json").read_text())
@@ -112,7 +118,7 @@ def load_sweep(sweep_dir: str | os.PathLike[str]) -> SweepResults:
             Record(
                 material=d["material"],
                 family=d.get("family") or family_of(d["material"]),
-                model=d["model"],
+                model=d.get("label") or d["model"],
                 metric=d["metric"],
                 loss=_num(d["loss"]),
                 losses={k: _num(v) for k, v in d.get("losses", {}).items()},
@@ -134,7 +140,8 @@ class Matrices:
     """Materials x models arrays for one metric (NaN where missing or unconverged).
 
     ``loss``, ``aic``, ``bic``, ``rel`` (loss / best - 1); ``rank``, ``rank_aic``,
-    ``rank_bic`` (1 = best; missing and unconverged ranked last).
+    ``rank_bic`` (1 = best, ties share their average rank, missing and unconverged
+    ranked last; module docstring); ``win`` (bool: converged and tied for the best loss).
     """
 
     metric: str
@@ -148,6 +155,7 @@ class Matrices:
     rank: np.ndarray
     rank_aic: np.ndarray
     rank_bic: np.ndarray
+    win: np.ndarray
 
 
 def matrices(res: SweepResults, metric: str) -> Matrices:
@@ -165,6 +173,8 @@ def matrices(res: SweepResults, metric: str) -> Matrices:
     best = np.array([np.nanmin(row) if np.isfinite(row).any() else np.nan for row in loss])
     with np.errstate(invalid="ignore", divide="ignore"):
         rel = loss / best[:, None] - 1.0
+    rank = np.array([ranks(row, LOSS_RTOL) for row in loss]).reshape(shape)
+    first = rank.min(axis=1, keepdims=True) if mods else rank
     return Matrices(
         metric,
         tuple(mats),
@@ -174,9 +184,10 @@ def matrices(res: SweepResults, metric: str) -> Matrices:
         aic,
         bic,
         rel,
-        np.array([_ranks(row) for row in loss]).reshape(shape),
-        np.array([_ranks(row) for row in aic]).reshape(shape),
-        np.array([_ranks(row) for row in bic]).reshape(shape),
+        rank,
+        np.array([ranks(row) for row in aic]).reshape(shape),
+        np.array([ranks(row) for row in bic]).reshape(shape),
+        np.isfinite(loss) & (rank == first),
     )
 
 
@@ -194,18 +205,21 @@ class AggregateRow:
     n_materials: int
 
 
-def _stats(rank: np.ndarray, rel: np.ndarray, axis: int):
+def _stats(rank: np.ndarray, win: np.ndarray, rel: np.ndarray, axis: int):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN columns -> NaN
-        return rank.mean(axis), (rank == 1).sum(axis), np.nanmedian(rel, axis)
+        return rank.mean(axis), win.sum(axis), np.nanmedian(rel, axis)
 
 
 def aggregate(mx: Matrices, *, n_boot: int = 1000, seed: int = 0) -> tuple[AggregateRow, ...]:
-    """Mean rank, wins and median relative error per model, best mean rank first."""
+    """Mean rank, wins and median relative error per model, best mean rank first.
+
+    A tie for first counts as a win for each tied model (module docstring).
+    """
     n = len(mx.materials)
-    mean, wins, med = _stats(mx.rank, mx.rel, 0)
+    mean, wins, med = _stats(mx.rank, mx.win, mx.rel, 0)
     idx = np.random.default_rng(seed).integers(0, n, (n_boot, n))
-    b_mean, b_wins, b_med = _stats(mx.rank[idx], mx.rel[idx], 1)
+    b_mean, b_wins, b_med = _stats(mx.rank[idx], mx.win[idx], mx.rel[idx], 1)
 
     def ci(b: np.ndarray, j: int) -> tuple[float, float]:
         col = b[:, j][np.isfinite(b[:, j])]
@@ -265,22 +279,55 @@ def per_material_table(mx: Matrices, fmt: str = "markdown") -> str:
             vals = (mx.loss[i, j], mx.aic[i, j], mx.bic[i, j])
             body.append(
                 [mat, mx.families[i], mx.models[j], *(f"{v:.6g}" for v in vals)]
-                + [str(mx.rank[i, j]), str(mx.rank_aic[i, j]), str(mx.rank_bic[i, j])]
+                + [rank_text(x) for x in (mx.rank[i, j], mx.rank_aic[i, j], mx.rank_bic[i, j])]
                 + [f"{mx.rel[i, j]:.4g}"]
             )
     return render(head, body, fmt)
 
 
+def cluster_order(vectors: np.ndarray) -> np.ndarray:
+    """Row order putting similar rows next to each other; fewer than 3 rows keep their order.
+
+    Average-linkage hierarchical clustering of the rows (Euclidean distance), leaves
+    ordered by ``scipy.cluster.hierarchy.optimal_leaf_ordering`` (adjacent rows as close
+    as the tree allows), the order turned so that it starts at the end holding the lower
+    original index, and runs of identical rows kept in their original order.
+    Deterministic: the same rows give the same order.
+    """
+    n = len(vectors)
+    if n < 3:
+        return np.arange(n)
+    from scipy.cluster.hierarchy import leaves_list, linkage, optimal_leaf_ordering
+
+    x = np.asarray(vectors, float)
+    tree = optimal_leaf_ordering(linkage(x, method="average", metric="euclidean"), x)
+    order = leaves_list(tree)
+    order = list(order if order[0] < order[-1] else order[::-1])
+    start = 0
+    for pos in range(1, n + 1):  # runs of identical rows in their original order
+        if pos == n or not np.array_equal(x[order[pos]], x[order[start]]):
+            order[start:pos] = sorted(order[start:pos])
+            start = pos
+    return np.array(order, int)
+
+
 def material_order(mx: Matrices) -> np.ndarray:
-    """Row order grouping materials by family (family order of :data:`FAMILIES`), then name."""
+    """Row order grouping materials by family (family order of :data:`FAMILIES`).
+
+    Inside a family the materials follow :func:`cluster_order` of their rank vectors
+    (``mx.rank`` rows), so materials that rank the models alike sit together; a family
+    of fewer than 3 materials keeps the manifest order.
+    """
     fam = {f: k for k, f in enumerate(FAMILIES)}
-    return np.array(
-        sorted(range(len(mx.materials)), key=lambda i: (fam.get(mx.families[i], 99), i)), int
-    )
+    groups: dict[str, list[int]] = {}
+    for i in sorted(range(len(mx.materials)), key=lambda i: (fam.get(mx.families[i], 99), i)):
+        groups.setdefault(mx.families[i], []).append(i)
+    out = [np.array(g)[cluster_order(mx.rank[g])] for g in groups.values()]
+    return np.concatenate(out).astype(int) if out else np.zeros(0, int)
 
 
 def rank_matrix_figure(mx: Matrices, rows: tuple[AggregateRow, ...] | None = None):
-    """Image of ranks, materials (grouped by family) x models (best mean rank first)."""
+    """Image of ranks, materials (:func:`material_order`) x models (best mean rank first)."""
     import matplotlib.pyplot as plt
 
     order = material_order(mx)
@@ -299,7 +346,8 @@ def rank_matrix_figure(mx: Matrices, rows: tuple[AggregateRow, ...] | None = Non
         for y in range(n):
             for x in range(k):
                 c = "k" if img[y, x] <= (k + 1) / 2 else "w"
-                ax.text(x, y, str(img[y, x]), ha="center", va="center", fontsize=7, color=c)
+                t = rank_text(img[y, x])
+                ax.text(x, y, t, ha="center", va="center", fontsize=7, color=c)
     fig.colorbar(im, ax=ax, label="rank (1 = best)")
     ax.set_title(f"rank by {mx.metric} per material")
     fig.tight_layout()

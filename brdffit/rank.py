@@ -7,6 +7,11 @@ parameters plus one. On measured data neighbouring samples share the same model
 error, so the effective ``n`` is far smaller than the count: the penalty for extra
 parameters is then too weak and differences of a few units mean little. The metric
 column is the number to quote; AIC/BIC order models of similar error by complexity.
+
+Ties: losses within a relative :data:`LOSS_RTOL` of each other are equal and share the
+average of the ranks they span (two models tied for first both get 1.5); AIC and BIC
+tie only when exactly equal. Unconverged fits (and NaN values) rank last, tied with
+each other.
 """
 
 from __future__ import annotations
@@ -20,6 +25,24 @@ from brdffit.errors import ParameterError
 from brdffit.result import FitResult
 from brdffit.tables import render
 
+LOSS_RTOL = 1e-5
+"""Relative loss difference below which two fits tie.
+
+A descent stops when a chunk of LM steps lowers the loss by less than 1e-9 relative
+(:mod:`brdffit.fit`), so one model's converged loss is reproducible to about that. Nested
+models are not that close: a model that contains another as a special case (Oren-Nayar
+at sigma = 0 is Lambert) approaches the boundary through a transformed parameter that
+never reaches it, while the smaller model sits on it, so the two converge to the same
+fit from different sides. On measured data Oren-Nayar stops ~2e-6 relative above
+Lambert. 1e-5 covers that with a factor 5 to spare and is still 1e4 times the stopping
+tolerance; a real difference between models smaller than 1e-5 is not one to rank by.
+"""
+
+TIES = (
+    f"Losses within a relative {LOSS_RTOL:g} tie and share their average rank; unconverged "
+    "fits rank last."
+)
+
 NOTE = (
     "n = residuals (3 x samples); samples with correlated model error make the effective "
     "n smaller, so AIC/BIC differences overstate the evidence."
@@ -28,7 +51,11 @@ NOTE = (
 
 @dataclass(frozen=True)
 class RankRow:
-    """One model's line: name and options, loss, AIC/BIC and their deltas, ranks."""
+    """One model's line: name and options, loss, AIC/BIC and their deltas, ranks.
+
+    Ranks are 1-based and tied values share their average (module docstring), so a
+    rank may be fractional (2.5).
+    """
 
     model: str
     options: str
@@ -37,9 +64,9 @@ class RankRow:
     bic: float
     delta_aic: float
     delta_bic: float
-    rank_loss: int
-    rank_aic: int
-    rank_bic: int
+    rank_loss: float
+    rank_aic: float
+    rank_bic: float
     n_free: int
     converged: bool
     wall_time: float
@@ -72,7 +99,7 @@ class Ranking:
         ]
         body = [
             [
-                str(getattr(r, f"rank_{self.by}")),
+                rank_text(getattr(r, f"rank_{self.by}")),
                 r.model,
                 r.options or "-",
                 f"{r.loss:.6g}",
@@ -91,8 +118,8 @@ class Ranking:
             return table
         title = f"Ranking by {self.by} on {self.source} (metric {self.metric}, n = {self.n_data})"
         if fmt == "markdown":
-            return f"**{title}**\n\n{table}\n_{NOTE}_"
-        return f"{title}\n{table}{NOTE}"
+            return f"**{title}**\n\n{table}\n_{TIES} {NOTE}_"
+        return f"{title}\n{table}{TIES}\n{NOTE}"
 
     def to_dict(self) -> dict:
         """JSON-ready form."""
@@ -106,22 +133,44 @@ class Ranking:
 
 
 def _changed_options(r: FitResult) -> str:
-    """The static options that differ from the model's defaults, as ``k=v`` text."""
+    """The static options that differ from the model's defaults: the ``k=v,...`` of its label."""
     from brdffit import models
 
-    try:
-        default = models.get(r.model).options()
-    except ParameterError:  # a model no longer registered: show every option
-        default = {}
-    return ", ".join(f"{k}={v}" for k, v in r.options.items() if default.get(k, object()) != v)
+    return models.label(r.model, r.options).partition("[")[2].removesuffix("]")
 
 
-def _ranks(values: np.ndarray) -> np.ndarray:
-    """1-based ranks, NaN last."""
-    order = np.argsort(np.where(np.isfinite(values), values, np.inf), kind="stable")
-    out = np.empty(len(values), int)
-    out[order] = np.arange(1, len(values) + 1)
+def rank_text(r: float) -> str:
+    """A rank as text: ``3`` or, for a tie, ``2.5``."""
+    return f"{r:g}"
+
+
+def ranks(values: np.ndarray, rtol: float = 0.0) -> np.ndarray:
+    """1-based ranks of ``values`` (smaller is better), ties sharing their average rank.
+
+    Sorted values tie with the first (smallest) value of their group while
+    ``|v - first| <= rtol * max(|v|, |first|)``; a group spanning ranks ``i..j`` gets
+    ``(i + j) / 2``. Anchoring on the group's first value keeps a chain of small steps
+    from merging values further apart than ``rtol``. Non-finite values rank last, tied
+    with each other. Use ``rtol=`` :data:`LOSS_RTOL` for losses.
+    """
+    key = np.asarray(values, float)
+    key = np.where(np.isfinite(key), key, np.inf)
+    order = np.argsort(key, kind="stable")
+    out = np.empty(len(key), float)
+    start = 0
+    for pos in range(1, len(order) + 1):
+        if pos < len(order) and _tied(key[order[start]], key[order[pos]], rtol):
+            continue
+        out[order[start:pos]] = (start + 1 + pos) / 2
+        start = pos
     return out
+
+
+def _tied(a: float, b: float, rtol: float) -> bool:
+    """Equal within ``rtol`` relative; the non-finite stand-in ``inf`` ties only with itself."""
+    if np.isinf(a) or np.isinf(b):
+        return bool(a == b)
+    return bool(abs(b - a) <= rtol * max(abs(a), abs(b)))
 
 
 def rank(results: Sequence[FitResult], *, by: str = "loss") -> Ranking:
@@ -130,7 +179,8 @@ def rank(results: Sequence[FitResult], *, by: str = "loss") -> Ranking:
     Arguments:
     - ``results``: :class:`FitResult` of one data set, one metric, any models.
     - ``by``: ``"loss"`` (the metric), ``"aic"`` or ``"bic"``; rows are sorted by it.
-      Unconverged fits keep their numbers but are ranked last.
+      Unconverged fits keep their numbers but are ranked last; ties as in the
+      module docstring, tied rows in the order given.
 
     Raises :class:`ParameterError` if the results mix metrics or data sets.
     """
@@ -152,7 +202,7 @@ def rank(results: Sequence[FitResult], *, by: str = "loss") -> Ranking:
         return np.where(ok, v, np.nan)
 
     loss, aic, bic = col("loss"), col("aic"), col("bic")
-    rk = {"loss": _ranks(loss), "aic": _ranks(aic), "bic": _ranks(bic)}
+    rk = {"loss": ranks(loss, LOSS_RTOL), "aic": ranks(aic), "bic": ranks(bic)}
     rows = [
         RankRow(
             model=r.model,
@@ -162,9 +212,9 @@ def rank(results: Sequence[FitResult], *, by: str = "loss") -> Ranking:
             bic=r.bic,
             delta_aic=r.aic - np.nanmin(aic) if ok.any() else float("nan"),
             delta_bic=r.bic - np.nanmin(bic) if ok.any() else float("nan"),
-            rank_loss=int(rk["loss"][i]),
-            rank_aic=int(rk["aic"][i]),
-            rank_bic=int(rk["bic"][i]),
+            rank_loss=float(rk["loss"][i]),
+            rank_aic=float(rk["aic"][i]),
+            rank_bic=float(rk["bic"][i]),
             n_free=r.n_free,
             converged=r.converged,
             wall_time=r.wall_time,

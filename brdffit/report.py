@@ -23,7 +23,7 @@ from brdffit.crossrank import (
     rank_matrix_figure,
 )
 from brdffit.pareto import error_vs_time, pareto_figure, pareto_table
-from brdffit.rank import NOTE
+from brdffit.rank import LOSS_RTOL, NOTE
 
 MAX_INLINE_ROWS = 200
 
@@ -50,6 +50,12 @@ def _header(res) -> list[str]:
         *_provenance(res),
         "",
         "Ranks are by the metric value per material; unconverged and missing fits rank last. "
+        f"Losses within a relative {LOSS_RTOL:g} of each other tie and share their average "
+        "rank (nested models converge to the same fit from different sides); a tie for "
+        "first counts as a win for each tied model. A model with non-default options is "
+        "ranked as a model of its own, named name[option=value,...]. The rank matrix "
+        "groups materials by family and, within a family of 3 or more, puts materials that "
+        "rank the models alike next to each other (average-linkage clustering). "
         "Relative error is loss / best loss on the material - 1. Intervals are 95% "
         "percentile bootstrap over materials (1000 resamples, seed 0). Fit times are the "
         "median over materials of each fit's wall time in its worker (compile included on "

@@ -1,14 +1,20 @@
 """Sweeps: fit many materials x models x metrics, one JSON file per result, resumable.
 
 A sweep folder holds ``sweep.json`` (the manifest, written first: materials with
-their sources and families, models with options, metrics, settings) and one file per
-task, ``<material>/<model>__<metric>.json``: :meth:`FitResult.to_dict` (NaN as null)
-plus ``material``, ``family``, ``eval_ns_per_sample`` and ``eval_n``. A task whose
-file exists and parses is finished and never redone, so an interrupted sweep resumes
-where it stopped; every file is written atomically by the worker that made it, so a
-kill loses at most the fits in flight. A fit that does not converge is a result
+their sources and families, model labels with all their options, metrics, settings)
+and one file per task, ``<material>/<stem>__<metric>.json``: :meth:`FitResult.to_dict`
+(NaN as null) plus ``label``, ``material``, ``family``, ``eval_ns_per_sample`` and
+``eval_n``. A model is given as a spec, ``name`` or ``name[k=v,...]``
+(:func:`brdffit.models.parse_spec`) and known by its canonical label
+(:func:`brdffit.models.label`); the file ``stem`` is the label with ``[`` and ``,``
+written ``@`` and ``]`` dropped (``lafortune[n_lobes=2,anisotropic=true]`` ->
+``lafortune@n_lobes=2@anisotropic=true``), so a model with default options keeps its
+plain name and older sweep folders resume. A task whose file exists and parses is
+finished and never redone, so an interrupted sweep resumes where it stopped; every file
+is written atomically by the worker that made it, so a kill loses at most the fits in
+flight. A fit that does not converge is a result
 (``converged`` false, ``status`` says why); an exception is written to
-``<model>__<metric>.error.json`` and the task is tried again on the next run.
+``<stem>__<metric>.error.json`` and the task is tried again on the next run.
 
 Times are measured in the worker the same way for every model: ``wall_time`` is the
 fit's own clock (:func:`brdffit.fit`, compile included on a worker's first fit of a
@@ -67,9 +73,22 @@ class Material:
     spec: dict | None = None
 
 
+def file_stem(label: str) -> str:
+    """The file-name form of a model label: ``name[k=v,k2=v2]`` -> ``name@k=v@k2=v2``.
+
+    Labels hold only letters, digits and ``_.+-=`` besides the brackets and commas
+    (:func:`brdffit.models.parse_spec`), so the stem is safe in a file name; a plain
+    name is its own stem.
+    """
+    return label.replace("[", "@").replace(",", "@").removesuffix("]")
+
+
 @dataclass(frozen=True)
 class Task:
-    """One (material, model, metric) fit and the settings shared by the sweep."""
+    """One (material, model, metric) fit and the settings shared by the sweep.
+
+    ``model`` is the model's label (:func:`brdffit.models.label`).
+    """
 
     material: Material
     model: str
@@ -77,8 +96,8 @@ class Task:
     settings: dict = field(default_factory=dict)
 
     def path(self, out: Path) -> Path:
-        """Result file ``<out>/<material>/<model>__<metric>.json``."""
-        return Path(out) / self.material.name / f"{self.model}__{self.metric}.json"
+        """Result file ``<out>/<material>/<stem>__<metric>.json`` (:func:`file_stem`)."""
+        return Path(out) / self.material.name / f"{file_stem(self.model)}__{self.metric}.json"
 
 
 @dataclass(frozen=True)
@@ -250,7 +269,7 @@ def run_task(task: Task, out: str) -> dict:
 
         s = task.settings
         data = _cached_data(task.material, tuple(s["stride"]))
-        model = models.get(task.model)
+        model = models.from_spec(task.model)
         r = fit(
             model,
             data,
@@ -264,6 +283,7 @@ def run_task(task: Task, out: str) -> dict:
         d = json.loads(r.to_json())
         ns = eval_cost(model, r.params, data, n=s["eval_n"]) if r.converged else None
         d.update(
+            label=task.model,
             material=task.material.name,
             family=task.material.family,
             eval_ns_per_sample=ns,
@@ -297,8 +317,11 @@ def is_finished(path: Path) -> bool:
         return False
 
 
-def _write_manifest(out: Path, materials, models_, metrics, settings: dict) -> dict:
-    """Write (or extend, on resume) ``sweep.json``; settings must match an existing one."""
+def _write_manifest(out: Path, materials, labels, metrics, settings: dict) -> dict:
+    """Write (or extend, on resume) ``sweep.json``; settings must match an existing one.
+
+    Its ``models`` maps each model label to every static option of the model (``repr``).
+    """
     from brdffit import models
 
     man = {"materials": {}, "models": {}, "metrics": [], "settings": settings}
@@ -319,8 +342,9 @@ def _write_manifest(out: Path, materials, models_, metrics, settings: dict) -> d
         if old is not None and (old["kind"], old["path"], old["spec"]) != (m.kind, m.path, m.spec):
             raise SweepError(f"{old_path}: material {m.name} already comes from {old['path']}")
         man["materials"][m.name] = asdict(m)
-    for name in models_:
-        man["models"][name] = {k: repr(v) for k, v in models.get(name).options().items()}
+    for label in labels:
+        model = models.from_spec(label)
+        man["models"][label] = {k: repr(v) for k, v in model.options().items()}
     man["metrics"] = list(dict.fromkeys([*man["metrics"], *metrics]))
     write_text(old_path, json.dumps(man, indent=1))
     return man
@@ -345,14 +369,19 @@ def run_sweep(
 
     Arguments:
     - ``materials``: from :func:`merl_materials`, :func:`nbrdf_materials` or
-      :func:`synthetic_materials`; ``models``: registry names (default options);
-      ``metrics``: metric names.
+      :func:`synthetic_materials`; ``models``: model specs, ``name`` or
+      ``name[k=v,...]`` (:func:`brdffit.models.parse_spec`; each variant is fitted and
+      ranked as a model of its own, specs of the same model counted once); ``metrics``:
+      metric names.
     - ``stride``, ``cut_deg``, ``n_restarts``, ``seed``, ``max_steps``: as in
       :func:`brdffit.fit` and :func:`brdffit.loading.load_measurements`; a resumed
       sweep must use the same values (else :class:`SweepError`).
     - ``eval_n``: samples of the evaluation-cost timing (module docstring).
     - ``jobs``: worker processes (default ``os.cpu_count()``); 1 runs in this process.
     - ``progress``: show a tqdm bar (tasks, materials finished, time left).
+
+    Raises :class:`~brdffit.errors.ParameterError` for a bad model spec or metric and
+    :class:`SweepError` for a bad setting or folder, before any fit.
     """
     from brdffit import models as registry
     from brdffit.metrics import get_metric
@@ -361,20 +390,21 @@ def run_sweep(
     out = Path(out)
     if isinstance(stride, int):
         stride = (stride, stride, stride)
-    for name in models:
-        registry.get(name)  # an unknown name fails before any work
+    # a bad spec fails before any work; equal variants (default options spelt out) merge
+    labels = [registry.label(registry.from_spec(m)) for m in models]
+    labels = list(dict.fromkeys(labels))
     for name in metrics:
         get_metric(name)
-    if not materials or not models or not metrics:
+    if not materials or not labels or not metrics:
         raise SweepError("a sweep needs at least one material, one model and one metric")
     settings = dict(
         stride=list(stride), cut_deg=cut_deg, n_restarts=n_restarts, seed=seed, max_steps=max_steps
     )
     settings["eval_n"] = eval_n
     out.mkdir(parents=True, exist_ok=True)
-    _write_manifest(out, materials, models, metrics, settings)
+    _write_manifest(out, materials, labels, metrics, settings)
     remove_temporaries(out)
-    tasks = [Task(m, mo, me, settings) for m in materials for mo in models for me in metrics]
+    tasks = [Task(m, mo, me, settings) for m in materials for mo in labels for me in metrics]
     todo = [t for t in tasks if not is_finished(t.path(out))]
     left = {m.name: sum(t.material.name == m.name for t in todo) for m in materials}
     counts = {"done": 0, "unconverged": 0, "errors": 0}

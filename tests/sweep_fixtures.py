@@ -36,12 +36,14 @@ def record(material: str, model: str, metric: str, loss, wall, ns, ok) -> dict:
     }
 
 
-def make_sweep(root: Path, metric: str = "low_e2") -> Path:
-    """Write ``sweep.json`` and one result file per entry of :data:`TABLE` under ``root``."""
+def make_sweep(root: Path, metric: str = "low_e2", table: dict | None = None) -> Path:
+    """Write ``sweep.json`` and one result file per entry of ``table`` (:data:`TABLE`)."""
+    table = TABLE if table is None else table
     root.mkdir(parents=True, exist_ok=True)
+    models = dict.fromkeys(model for row in table.values() for model in row)
     manifest = {
-        "materials": {m: {"name": m, "kind": "merl", "path": None, "spec": None} for m in TABLE},
-        "models": {"a": {}, "b": {}},
+        "materials": {m: {"name": m, "kind": "merl", "path": None, "spec": None} for m in table},
+        "models": {model: {} for model in models},
         "metrics": [metric],
         "settings": {
             "stride": [15, 15, 15],
@@ -53,7 +55,7 @@ def make_sweep(root: Path, metric: str = "low_e2") -> Path:
         },
     }
     (root / "sweep.json").write_text(json.dumps(manifest))
-    for mat, row in TABLE.items():
+    for mat, row in table.items():
         (root / mat).mkdir(exist_ok=True)
         for model, vals in row.items():
             path = root / mat / f"{model}__{metric}.json"

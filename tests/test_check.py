@@ -149,3 +149,10 @@ def test_cli_check_unknown_model_is_one_line_and_exit_2(capsys):
     out, err = capsys.readouterr()
     assert code == 2 and out == ""
     assert len(err.strip().splitlines()) == 1 and "unknown model 'nope'" in err
+
+
+def test_cli_check_a_variant_labels_its_rows(capsys):
+    code = main(["check", "lafortune[n_lobes=2]", "--dtype", "float64", "--format", "csv"])
+    out, err = capsys.readouterr()
+    assert code == 0 and err == ""
+    assert [line.split(",")[0] for line in out.splitlines()[1:]] == ["lafortune[n_lobes=2]"] * 3

@@ -66,6 +66,25 @@ def test_fit_with_options_and_freeze(capsys, merl_file):
     assert code == 0 and "distribution='beckmann'" in out and "(frozen)" in out
 
 
+def test_fit_with_a_spec_and_an_option(capsys, merl_file):
+    code, out, _ = _run(
+        capsys,
+        "fit",
+        merl_file,
+        "--model",
+        "walter[distribution=beckmann]",
+        "--option",
+        "anisotropic=false",
+        "--restarts",
+        "0",
+        "--stride",
+        "15",
+        "15",
+        "15",
+    )
+    assert code == 0 and "walter(distribution='beckmann', " in out
+
+
 def test_rank(capsys, merl_file):
     code, out, _ = _run(
         capsys, "rank", merl_file, "--models", "lambert,walter", "--format", "markdown", *SMALL
@@ -85,6 +104,11 @@ def test_rank(capsys, merl_file):
         (["fit", "{good}", "--model", "walter", "--freeze", "beta=1"], "cannot freeze"),
         (["rank", "{good}", "--models", "walter,nope"], "unknown model 'nope'"),
         (["fit", "{good}", "--model", "walter", "--stride", "2", "2", "2"], "stride"),
+        (["fit", "{good}", "--model", "walter[colour=red]"], "no option(s) ['colour']"),
+        (["fit", "{good}", "--model", "lafortune[n_lobes=2]", "--option", "n_lobes=x"], "n_lobes"),
+        (["rank", "{good}", "--models", "walter,lafortune[n_lobes=two]"], "is not of type int"),
+        (["rank", "{good}", "--models", "walter,lafortune[n_lobes=2"], "unbalanced brackets"),
+        (["rank", "{good}", "--models", "nope[n_lobes=2],walter"], "'nope[n_lobes=2]'"),
     ],
 )
 def test_bad_input_is_one_line_and_exit_2(capsys, merl_file, tmp_path, argv, needle):

@@ -106,3 +106,54 @@ def test_error_vs_time(tmp_path):
 def test_not_a_sweep_folder(tmp_path):
     with pytest.raises(SweepError, match="sweep.json"):
         load_sweep(tmp_path)
+
+
+def test_near_equal_losses_tie_and_a_shared_first_is_a_win_for_each(tmp_path):
+    # steel: b is a nested model stopped 3e-6 relative above a (inside LOSS_RTOL = 1e-5);
+    # gray-rubber: nothing converged, both last and tied, no win for anyone.
+    table = dict(TABLE)
+    table["steel"] = {"a": (0.5, 0.4, 10.0, True), "b": (0.5 * (1 + 3e-6), 0.3, 5.0, True)}
+    table["gray-rubber"] = {"a": (1.0, 0.4, 10.0, False), "b": (1.0, 0.3, 5.0, False)}
+    mx = matrices(load_sweep(make_sweep(tmp_path, table=table)), "low_e2")
+    by = dict(zip(mx.materials, mx.rank.tolist(), strict=True))
+    assert by["steel"] == [1.5, 1.5] and by["gray-rubber"] == [1.5, 1.5]
+    assert by["gold-metallic-paint"] == [1, 2] and by["red-plastic"] == [2, 1]
+    i = mx.materials.index("steel")
+    assert mx.rank_aic[i].tolist() == [1, 2]  # AIC ties only when equal; b has 4 more params
+    rows = {r.model: r for r in aggregate(mx, n_boot=200)}
+    assert (rows["a"].wins, rows["b"].wins) == (3, 2)  # steel counts for both
+    assert rows["a"].mean_rank == pytest.approx((1 + 2 + 1.5 + 1 + 1.5) / 5)
+    assert rows["b"].mean_rank == pytest.approx((2 + 1 + 1.5 + 2 + 1.5) / 5)
+    csv = [line.split(",") for line in per_material_table(mx, "csv").splitlines()]
+    assert [row[6] for row in csv if row[0] == "steel"] == ["1.5", "1.5"]  # rank column
+
+
+# material -> losses of models a, b, c, d (the losses are also the ranks)
+CLUSTER_TABLE = {
+    "red-plastic": (4, 3, 2, 1),
+    "steel-1": (1, 2, 3, 4),
+    "steel-2": (4, 3, 2, 1),
+    "steel-3": (1, 2, 3, 4),  # ranks the models like steel-1
+    "steel-4": (4, 3, 1, 2),  # close to steel-2
+    "steel-5": (2, 1, 4, 3),  # close to steel-1 and -3
+    "blue-plastic": (1, 2, 3, 4),
+}
+
+
+def test_materials_are_clustered_by_rank_vector_within_a_family(tmp_path):
+    table = {
+        m: {k: (float(x), 0.1, 1.0, True) for k, x in zip("abcd", v, strict=True)}
+        for m, v in CLUSTER_TABLE.items()
+    }
+    mx = matrices(load_sweep(make_sweep(tmp_path / "s", table=table)), "low_e2")
+    order = [mx.materials[i] for i in material_order(mx)]
+    # plastics first (family order) and, only two of them, in manifest order; the steels
+    # in two clusters {1, 3, 5} and {2, 4} whose nearest members (5 and 2) meet, starting
+    # at the end that holds the first steel of the manifest
+    assert order == ["red-plastic", "blue-plastic"] + [f"steel-{k}" for k in (1, 3, 5, 2, 4)]
+    copy = make_sweep(tmp_path / "copy", table=table)
+    assert material_order(matrices(load_sweep(copy), "low_e2")).tolist() == (
+        material_order(mx).tolist()
+    )
+    labels = [t.get_text() for t in rank_matrix_figure(mx).axes[0].get_yticklabels()]
+    assert [t.split(": ")[1] for t in labels] == order

@@ -6,9 +6,17 @@ import json
 import re
 import shutil
 
+import pytest
+
 from brdffit.cli import main
 from brdffit.report import write_report
-from tests.sweep_fixtures import make_sweep
+from tests.sweep_fixtures import TABLE, make_sweep
+
+# four steels (one family, so clustered) with a tie for first on steel-2 and steel-4
+STEELS = {
+    f"steel-{i}": {"a": (a, 0.1, 1.0, True), "b": (b, 0.2, 2.0, True), "c": (3.0, 0.3, 3.0, True)}
+    for i, (a, b) in enumerate([(1.0, 2.0), (1.0, 1.0 + 1e-6), (2.0, 1.0), (1.0, 1.0 + 1e-6)], 1)
+}
 
 
 def _outputs(path):
@@ -27,10 +35,13 @@ def test_report_files_and_content(tmp_path):
         assert (path.parent / f"{name}_low_e2.csv").exists()
     assert "1 not converged" in text
     assert str(tmp_path) not in text
+    assert "Losses within a relative 1e-05 of each other tie and share their average rank" in text
+    assert "a tie for first counts as a win for each tied model" in text
 
 
-def test_report_reproducible_from_json_alone(tmp_path):
-    src = make_sweep(tmp_path / "a")
+@pytest.mark.parametrize("table", [TABLE, STEELS], ids=["families", "ties-and-clusters"])
+def test_report_reproducible_from_json_alone(tmp_path, table):
+    src = make_sweep(tmp_path / "a", table=table)
     first = _outputs(write_report(src))
     assert _outputs(write_report(src)) == first  # same files, same report
     copy = tmp_path / "b"
@@ -62,3 +73,12 @@ def test_report_names_mixed_code_versions_and_devices(tmp_path):
     text = write_report(src).read_text()
     assert "on gpu (NVIDIA H100 80GB HBM3) (1 results)" in text
     assert "more than one code version or device" in text
+
+
+def test_report_counts_a_shared_first_place_for_each_model(tmp_path):
+    text = write_report(make_sweep(tmp_path / "s", table=STEELS)).read_text()
+    # a: ranks 1, 1.5, 2, 1.5, wins on steel-1, -2, -4; b: 2, 1.5, 1, 1.5, wins on -2, -3, -4:
+    # 6 wins on 4 materials, as each shared first place is a win for both
+    assert re.search(r"\| a \| 1\.50 \[[^|]*\| 3 \[", text), text
+    assert re.search(r"\| b \| 1\.50 \[[^|]*\| 3 \[", text), text
+    assert re.search(r"\| c \| 3\.00 \[[^|]*\| 0 \[", text), text
