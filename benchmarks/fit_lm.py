@@ -89,12 +89,12 @@ def main() -> None:
     lo, hi = layout.bounds_flat()
 
     t = time.perf_counter()
-    first = fit(m, data, "low_e2", init=start, n_restarts=0)
+    first = fit(m, data, "low_e2", init=start, n_restarts=0, screen=0)
     t_first = time.perf_counter() - t
     warm = []
     for _ in range(args.repeats):
         t = time.perf_counter()
-        r = fit(m, data, "low_e2", init=start, n_restarts=0)
+        r = fit(m, data, "low_e2", init=start, n_restarts=0, screen=0)
         warm.append(time.perf_counter() - t)
     t_ours = min(warm)
     print(

@@ -94,6 +94,7 @@ def cmd_fit(args) -> None:
         freeze=_freeze(args.freeze),
         cut_deg=args.cut,
         n_restarts=args.restarts,
+        screen=args.screen,
         seed=args.seed,
         robust=args.robust,
         robust_scale=args.robust_scale,
@@ -165,6 +166,7 @@ def cmd_sweep(args) -> None:
         stride=tuple(args.stride),
         cut_deg=args.cut,
         n_restarts=args.restarts,
+        screen=args.screen,
         seed=args.seed,
         jobs=args.jobs,
         progress=not args.no_progress,
@@ -247,7 +249,10 @@ def build_parser() -> argparse.ArgumentParser:
     s = sub.add_parser("fit", help="Levenberg-Marquardt fit of one model")
     data_args(s)
     fit_args(s)
-    s.add_argument("--restarts", type=int, default=2)
+    s.add_argument("--restarts", type=int, default=1, help="random starts near the first")
+    s.add_argument(
+        "--screen", type=int, default=32, help="spread candidates screened for one more start"
+    )
     s.add_argument(
         "--robust", choices=["huber", "cauchy"], help="robust loss on the residuals (outliers)"
     )
@@ -285,7 +290,10 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--metrics", default="low_e2", help="comma-separated metric names")
     _stride_arg(s)
     s.add_argument("--cut", type=float, default=80.0, help="zenith cut, degrees")
-    s.add_argument("--restarts", type=int, default=2)
+    s.add_argument("--restarts", type=int, default=1, help="random starts near the first")
+    s.add_argument(
+        "--screen", type=int, default=32, help="spread candidates screened for one more start"
+    )
     s.add_argument("--seed", type=int, default=0)
     s.add_argument("--jobs", type=int, default=None, help="worker processes (default: cores)")
     s.add_argument("--no-progress", action="store_true")

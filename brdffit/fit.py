@@ -4,8 +4,9 @@ The fit runs in the unconstrained space of each parameter's transform
 (:mod:`brdffit.parameters`) on the residual vector of the chosen metric
 (:mod:`brdffit.metrics`). Each start solves the parameters the model is affine in
 (``Parameter.linear``: albedos, F0) by weighted linear least squares with the
-other parameters fixed; the first start is the defaults (or ``init``), the others are
-seeded random draws of the nonlinear parameters; the lowest loss wins.
+other parameters fixed; the first start is the defaults (or ``init``), then seeded
+random draws of the nonlinear parameters near it, then the best of a screen of
+candidates spread over their whole ranges; the lowest loss wins.
 
 Uncertainties come from the Jacobian ``J`` of the residuals with respect to the free
 natural parameters at the optimum (the delta method applied to the unconstrained
@@ -66,20 +67,24 @@ def _objective_residuals(model, free, metric, robust, u, prep, frozen, scale):
 
 
 @eqx.filter_jit
-def _solve(model, free, metric, robust, solver, u0, prep, frozen, active, scale, rscale, max_steps):
+def _solve(
+    model, free, metric, robust, solver, u0, prep, frozen, active, scale, rscale, cscale, max_steps
+):
     """LM in unconstrained space; scalars with ``active == False`` stay at ``u0``.
 
-    The residuals are multiplied by ``rscale`` (see :func:`_residual_scale`).
+    LM works on ``v = cscale * u`` with the residuals multiplied by ``rscale`` (see
+    :func:`_scales`): optimistix damps with ``lambda I``, so scaling the columns of
+    ``J`` to one norm makes that Marquardt's scale-invariant ``lambda diag(J^T J)``.
     """
 
-    def fn(u, args):
+    def fn(v, args):
         prep, frozen, scale, rscale = args
-        u = jnp.where(active, u, u0)
+        u = jnp.where(active, v / cscale, u0)
         return rscale * _objective_residuals(model, free, metric, robust, u, prep, frozen, scale)
 
     args = (prep, frozen, scale, rscale)
-    sol = optx.least_squares(fn, solver, u0, args=args, max_steps=max_steps, throw=False)
-    u = jnp.where(active, sol.value, u0)
+    sol = optx.least_squares(fn, solver, u0 * cscale, args=args, max_steps=max_steps, throw=False)
+    u = jnp.where(active, sol.value / cscale, u0)
     f = model.evaluate(_natural(free, u, frozen), prep.g)
     return u, sol.result, sol.stats["num_steps"], metrics_mod.loss(metric, f, prep)
 
@@ -100,23 +105,35 @@ def _cost_gradient(model, free, metric, robust, u, prep, frozen, scale):
 
 
 @eqx.filter_jit
-def _residual_scale(model, free, metric, robust, u, prep, frozen, scale, active):
-    """``1 / sqrt(TAU max_j (J^T J)_jj)`` over the active columns at ``u`` (1 if degenerate).
+def _scales(model, free, metric, robust, u, prep, frozen, scale, active):
+    """Residual and column scales for LM at ``u``: ``(rscale, cscale)``.
 
-    optimistix's LM starts with damping ``lambda = 1`` whatever the size of ``J^T J``;
-    on a metric whose residuals are ~1e-3 (Ngan's RMS) that is a thousand times the
-    curvature, so each descent first spends ~10 steps growing its trust region.
-    Scaling the residuals (the minimiser is unchanged) starts it at ``TAU`` times the
-    largest curvature, Marquardt's and MINPACK's choice.
+    ``cscale_j = |J_j| / max_k |J_k|`` over the active columns (floored at ``_COL_FLOOR``;
+    1 for inactive or degenerate ones). optimistix's LM damps every direction alike
+    (``lambda I``); a parameter whose column of ``J`` is 1e-5 of the largest, e.g. an
+    albedo deep in its logit tail, then moves ~1e-10 of its Gauss-Newton step per
+    step and the fit crawls for hundreds of steps. Scaling the columns gives
+    Marquardt's (and MINPACK's) ``lambda diag(J^T J)`` damping instead.
+
+    ``rscale = 1 / sqrt(TAU max_j (J^T J)_jj)`` (1 if degenerate): optimistix's LM
+    starts with ``lambda = 1`` whatever the size of ``J^T J``; on a metric whose residuals
+    are ~1e-3 (Ngan's RMS) that is a thousand times the curvature, so each descent first
+    spends ~10 steps growing its trust region. Scaling the residuals (the minimiser is
+    unchanged) starts it at ``TAU`` times the largest curvature.
     """
 
     def fn(u):
         return _objective_residuals(model, free, metric, robust, u, prep, frozen, scale)
 
     j = jax.jacfwd(fn)(u) * active[None, :]
-    top = jnp.max(jnp.sum(j * j, axis=0))
+    norms = jnp.sqrt(jnp.sum(j * j, axis=0))
+    top = jnp.max(norms)
     ok = jnp.isfinite(top) & (top > 0)
-    return jnp.where(ok, 1.0 / jnp.sqrt(_TAU * jnp.where(ok, top, 1.0)), 1.0)
+    safe_top = jnp.where(ok, top, 1.0)
+    col = jnp.where(
+        active & ok & jnp.isfinite(norms), jnp.maximum(norms / safe_top, _COL_FLOOR), 1.0
+    )
+    return jnp.where(ok, 1.0 / (jnp.sqrt(_TAU) * safe_top), 1.0), col
 
 
 @eqx.filter_jit
@@ -139,6 +156,8 @@ def _plain_residuals(model, free, metric, u, prep, frozen):
 
 
 _TAU = 1e-3  # initial LM damping relative to the largest diagonal entry of J^T J
+_LOCAL = 1e-3  # relative loss decrease per chunk below which the columns are scaled
+_COL_FLOOR = 1e-8  # smallest column scale: a column 1e-8 of the largest is left that small
 _STALL = 1e-9  # relative loss decrease over a chunk below which a descent has converged
 _CHUNK = 8  # LM steps between two looks for parameters saturated at a bound
 _FINISH_CHUNK = 4  # the same when finishing on all samples from the coarse optimum
@@ -163,15 +182,15 @@ class _Problem:
     def with_robust(self, robust: str | None, scale: float) -> _Problem:
         return dataclasses.replace(self, robust=robust, scale=scale)
 
-    def solve(self, u0, prep, active: np.ndarray, max_steps: int, rscale=1.0):
+    def solve(self, u0, prep, active: np.ndarray, max_steps: int, rscale=1.0, cscale=1.0):
         return _solve(
             self.model, self.layout.free, self.metric, self.robust, self.solver, u0, prep,
             self.frozen, jnp.asarray(active), jnp.asarray(self.scale), jnp.asarray(rscale),
-            max_steps,
+            jnp.broadcast_to(jnp.asarray(cscale, jnp.float64), jnp.shape(u0)), max_steps,
         )  # fmt: skip
 
-    def residual_scale(self, u, prep, active: np.ndarray) -> jax.Array:
-        return _residual_scale(
+    def scales(self, u, prep, active: np.ndarray) -> tuple[jax.Array, jax.Array]:
+        return _scales(
             self.model, self.layout.free, self.metric, self.robust, u, prep, self.frozen,
             jnp.asarray(self.scale), jnp.asarray(active),
         )  # fmt: skip
@@ -213,14 +232,21 @@ class _Problem:
         Gauss-Newton gain tells them apart: below ``_STALL`` times the cost the descent
         has converged (scipy's ``ftol`` is 1e-8 per step); otherwise the next chunk
         starts with the damping raised by ``1 / _DAMP_UP^2``.
+
+        The columns of ``J`` are scaled (:func:`_scales`) once a chunk lowers the loss by
+        less than ``_LOCAL`` (relative): near the minimum, where LM's quadratic model
+        holds, uniform damping would make weakly-sensitive parameters crawl; far from
+        it, scaling would let those same parameters leap across their transforms'
+        tails and be pinned on the wrong bound.
         """
         bounded = _bounded(self.layout)
-        previous = math.inf
-        rscale = self.residual_scale(u, prep, active)
+        previous, damp, scaled = math.inf, 1.0, False
         floor = 1e-15 * self._cost(u, prep)  # a zero-residual fit's cost is rounding
         while True:
             before = np.abs(np.asarray(u))
-            u, res, k, loss = self.solve(u, prep, active, chunk, rscale)
+            rscale, cscale = self.scales(u, prep, active)
+            cscale = cscale if scaled else 1.0
+            u, res, k, loss = self.solve(u, prep, active, chunk, rscale * damp, cscale)
             steps, loss = steps + int(k), float(loss)
             if res != optx.RESULTS.nonlinear_max_steps_reached:
                 break
@@ -229,7 +255,7 @@ class _Problem:
                 if self._gain(u, prep, active) <= _STALL * max(self._cost(u, prep), floor):
                     res = optx.RESULTS.successful
                     break
-                rscale = rscale * _DAMP_UP
+                damp = damp * _DAMP_UP
             if steps >= max_steps:
                 break
             if sat.any():
@@ -237,6 +263,7 @@ class _Problem:
                 active = active & ~sat
             outward = np.abs(np.asarray(u)) > before + 1e-3
             u, active = self._probe_pins(u, prep, active, bounded & outward)
+            scaled = scaled or previous - loss < _LOCAL * abs(loss)
             previous = loss
         return _Descent(u, res, steps, loss, active)
 
@@ -398,6 +425,50 @@ def _random_start(layout: ParameterLayout, base: Params, rng: np.random.Generato
     return out
 
 
+def _spread_start(layout: ParameterLayout, base: Params, rng: np.random.Generator) -> Params:
+    """A candidate anywhere in the nonlinear parameters' ranges (linear ones as ``base``).
+
+    A saturating transform's scalar is drawn uniform in ``t = sigmoid(u)`` over
+    [0.02, 0.98] (log-uniform over the span of a bounded log parameter: roughness,
+    exponents); other scalars at ``N(0, 2)`` in ``u`` around ``base``.
+    """
+    out = dict(base)
+    for p in layout.free:
+        if p.linear:
+            continue
+        if p.saturates:
+            t = rng.uniform(0.02, 0.98, p.shape)
+            u = np.log(t) - np.log1p(-t)
+        else:
+            u = np.asarray(p.to_unconstrained(jnp.asarray(base[p.name]))) + rng.normal(
+                0.0, 2.0, p.shape
+            )
+        out[p.name] = p.to_natural(jnp.asarray(u))
+    return out
+
+
+def _screened_start(
+    problem: _Problem, base: Params, prep, rng: np.random.Generator, n: int
+) -> Params | None:
+    """The lowest-cost of ``n`` spread candidates, linear parameters solved for each.
+
+    A local descent started with the lobe far too wide or too narrow can end in a
+    corner minimum (walter from a random start: ``J = 1536`` against ``4e-29``); the
+    cost over candidates spread across the whole range finds the right basin for a
+    few dozen model evaluations on the coarse samples.
+    """
+    best, best_cost = None, math.inf
+    layout = problem.layout
+    for _ in range(n):
+        c = _with_linear_start(
+            problem.model, problem.metric, layout, _spread_start(layout, base, rng), prep
+        )
+        cost = problem._cost(layout.unconstrained(c), prep)
+        if cost < best_cost:
+            best, best_cost = c, cost
+    return best
+
+
 def _covariance(
     j: np.ndarray, r: np.ndarray, method: str, n_free: int
 ) -> tuple[np.ndarray | None, float, str | None, np.ndarray]:
@@ -442,7 +513,8 @@ def fit(
     init: Mapping[str, object] | None = None,
     freeze: Freeze = None,
     cut_deg: float | None = 80.0,
-    n_restarts: int = 2,
+    n_restarts: int = 1,
+    screen: int = 32,
     seed: int = 0,
     max_steps: int = 256,
     rtol: float = 1e-10,
@@ -463,7 +535,9 @@ def fit(
     - ``freeze``: names (frozen at their start value) or name -> value; frozen
       parameters leave the fit and get zero standard error.
     - ``cut_deg``: zenith-angle cut for both directions, degrees (``None``: none).
-    - ``n_restarts``: seeded random starts in addition to the first one.
+    - ``n_restarts``: seeded random starts (near the first one) in addition to it.
+    - ``screen``: spread candidates whose best (linear parameters solved, lowest
+      cost on the coarse samples) is one more start; 0 turns the screen off.
     - ``max_steps``, ``rtol``, ``atol``: LM limits (per descent) and tolerances.
     - ``errors``: ``"sandwich"`` or ``"classic"`` (module docstring).
     - ``robust``: ``None``, ``"huber"`` or ``"cauchy"``: a robust loss on the metric's
@@ -486,6 +560,8 @@ def fit(
         raise ParameterError(f"robust={robust!r}: use None, 'huber' or 'cauchy'")
     if robust_scale is not None and not (math.isfinite(robust_scale) and robust_scale > 0):
         raise ParameterError(f"robust_scale={robust_scale!r}: must be a positive number")
+    if screen < 0 or n_restarts < 0:
+        raise ParameterError(f"screen={screen!r}, n_restarts={n_restarts!r}: must be >= 0")
     if coarse is not None and coarse < 100:
         raise ParameterError(f"coarse={coarse!r}: use None or at least 100 samples")
     start = _start_params(model, init)
@@ -505,6 +581,10 @@ def fit(
     small = _subset(prep, coarse)
     first = {**start, **frozen}
     starts = [first] + [_random_start(layout, first, rng) for _ in range(n_restarts)]
+    if screen and any(not p.linear for p in layout.free):
+        screened = _screened_start(problem, first, small, rng, screen)
+        if screened is not None:  # None when no candidate had a finite cost
+            starts.append(screened)
     everywhere = np.ones(layout.size, bool)
     best, best_start, coarse_steps = None, first, 0
     for s in starts:

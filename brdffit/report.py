@@ -45,7 +45,8 @@ def _header(res) -> list[str]:
         f"- metrics: {', '.join(res.metrics)} (the metric dominates the parameters: "
         "compare models only under the same metric)",
         f"- MERL grid stride {tuple(s['stride'])}, angle cut {cut}, "
-        f"{s['n_restarts']} random restarts (seed {s['seed']}), at most {s['max_steps']} LM steps",
+        f"{s['n_restarts']} random restarts and a screen of {s.get('screen', 0)} candidates "
+        f"(seed {s['seed']}), at most {s['max_steps']} LM steps",
         f"- results: {done} of {total} tasks, {unconv} not converged, {len(res.errors)} errors",
         *_provenance(res),
         "",

@@ -4,7 +4,8 @@ A *case* is one model, one metric and one :class:`Regime`. For each case the tru
 drawn from the model's baseline parameters (:data:`ROLES`, jittered with the case's
 seed) and changed as the regime says; the data are synthesised from it; then the model
 is fitted once from the truth (the *reference*) and from ``n_starts`` seeded random
-starts (``init=`` a random natural point, ``n_restarts=0``).
+starts (``init=`` a random natural point, ``n_restarts=0``; the fit's own screen of
+spread candidates still adds its one start, as it does in use).
 
 **Recovery.** A start is recovered when its fit is finite, converged (``Status.CONVERGED``)
 and its final objective ``J`` (``0.5 sum rho(r)^2``, what LM minimises: the metric's

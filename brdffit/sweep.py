@@ -47,7 +47,7 @@ from brdffit.errors import SweepError
 from brdffit.families import family_of
 
 MANIFEST = "sweep.json"
-SETTINGS = ("stride", "cut_deg", "n_restarts", "seed", "max_steps", "eval_n")
+SETTINGS = ("stride", "cut_deg", "n_restarts", "screen", "seed", "max_steps", "eval_n")
 
 # Synthetic material recipes: (family word, model, parameter sampler).
 _SYNTH = (
@@ -276,6 +276,7 @@ def run_task(task: Task, out: str) -> dict:
             task.metric,
             cut_deg=s["cut_deg"],
             n_restarts=s["n_restarts"],
+            screen=s.get("screen", 0),  # sweeps made before the screen existed had none
             seed=s["seed"],
             max_steps=s["max_steps"],
             throw=False,
@@ -358,7 +359,8 @@ def run_sweep(
     *,
     stride: tuple[int, int, int] | int = (1, 1, 1),
     cut_deg: float | None = 80.0,
-    n_restarts: int = 2,
+    n_restarts: int = 1,
+    screen: int = 32,
     seed: int = 0,
     max_steps: int = 256,
     eval_n: int = 65536,
@@ -373,7 +375,7 @@ def run_sweep(
       ``name[k=v,...]`` (:func:`brdffit.models.parse_spec`; each variant is fitted and
       ranked as a model of its own, specs of the same model counted once); ``metrics``:
       metric names.
-    - ``stride``, ``cut_deg``, ``n_restarts``, ``seed``, ``max_steps``: as in
+    - ``stride``, ``cut_deg``, ``n_restarts``, ``screen``, ``seed``, ``max_steps``: as in
       :func:`brdffit.fit` and :func:`brdffit.loading.load_measurements`; a resumed
       sweep must use the same values (else :class:`SweepError`).
     - ``eval_n``: samples of the evaluation-cost timing (module docstring).
@@ -398,8 +400,9 @@ def run_sweep(
     if not materials or not labels or not metrics:
         raise SweepError("a sweep needs at least one material, one model and one metric")
     settings = dict(
-        stride=list(stride), cut_deg=cut_deg, n_restarts=n_restarts, seed=seed, max_steps=max_steps
-    )
+        stride=list(stride), cut_deg=cut_deg, n_restarts=n_restarts, screen=screen, seed=seed,
+        max_steps=max_steps,
+    )  # fmt: skip
     settings["eval_n"] = eval_n
     out.mkdir(parents=True, exist_ok=True)
     _write_manifest(out, materials, labels, metrics, settings)

@@ -142,7 +142,7 @@ def test_an_albedo_whose_optimum_is_zero_is_pinned_without_a_crawl(walter):
     truth = {**TRUTH, "kd": [0.0, 0.2, 0.3]}
     data = synthesize(walter, truth, stride=GRID)
     for metric in ("low_e2", "ngan"):
-        r = fit(walter, data, metric, n_restarts=0)
+        r = fit(walter, data, metric, n_restarts=0, screen=0)  # the one start's descent
         assert r.converged and "kd" in r.at_bound and r.n_steps <= 64, (metric, r.n_steps)
         np.testing.assert_allclose(r.params["kd"], truth["kd"], atol=1e-9)
         np.testing.assert_allclose(r.params["alpha"], 0.15, rtol=1e-6)

@@ -16,20 +16,14 @@ import pytest
 from brdffit import models, stress
 from brdffit.metrics import get_metric, prepare
 
-_WRONG_MINIMUM = pytest.mark.xfail(
-    strict=True,
-    reason="issue 4 open: from one random start (n_restarts=0) walter can converge to a "
-    "wrong minimum (baseline: J = 1536 against 4e-29); fit()'s 3 starts hide it in use",
-)
-
 
 @pytest.mark.parametrize(
     "regime",
     [
-        pytest.param("baseline", marks=_WRONG_MINIMUM),
+        "baseline",
         "near_mirror",
         "outliers_huber",
-        pytest.param("missing_half", marks=_WRONG_MINIMUM),
+        "missing_half",
     ],
 )
 def test_walter_recovers_from_random_starts(regime):
