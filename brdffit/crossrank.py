@@ -285,6 +285,23 @@ def per_material_table(mx: Matrices, fmt: str = "markdown") -> str:
     return render(head, body, fmt)
 
 
+def family_table(mx: Matrices, fmt: str = "markdown", top: int = 3) -> str:
+    """Per material family: its size and the ``top`` models by mean rank over its materials.
+
+    Mean ranks are those of :attr:`Matrices.rank` (ties averaged, unconverged last),
+    so a model's place within a family reads like the overall ranking.
+    """
+    head = ["family", "n", *(f"#{k + 1} (mean rank)" for k in range(top))]
+    body = []
+    for fam in sorted(set(mx.families)):
+        rows = np.array([f == fam for f in mx.families])
+        mean = mx.rank[rows].mean(axis=0)
+        best = np.argsort(mean, kind="stable")[:top]
+        cells = [f"{mx.models[j]} ({mean[j]:.2f})" for j in best]
+        body.append([fam, str(int(rows.sum())), *cells, *[""] * (top - len(cells))])
+    return render(head, body, fmt)
+
+
 def cluster_order(vectors: np.ndarray) -> np.ndarray:
     """Row order putting similar rows next to each other; fewer than 3 rows keep their order.
 

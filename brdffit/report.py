@@ -2,7 +2,7 @@
 
 ``write_report(sweep_dir)`` writes ``<sweep_dir>/report/report.md`` and beside it,
 per metric, the CSV tables (``aggregate_<metric>.csv``, ``per_material_<metric>.csv``,
-``pareto_<metric>.csv``) and the figures (``rank_matrix_<metric>.png``,
+``pareto_<metric>.csv``, ``families_<metric>.csv``) and the figures (``rank_matrix_<metric>.png``,
 ``pareto_<metric>.png``). The text holds no date and no absolute path and the
 bootstrap is seeded, so the same JSON files give the same report.
 """
@@ -17,6 +17,7 @@ from brdffit.atomic import save_figure, write_text
 from brdffit.crossrank import (
     aggregate,
     aggregate_table,
+    family_table,
     load_sweep,
     matrices,
     per_material_table,
@@ -110,6 +111,7 @@ def write_report(sweep_dir: str | os.PathLike[str], *, n_boot: int = 1000, seed:
         write_text(out / f"aggregate_{metric}.csv", aggregate_table(agg, "csv"))
         write_text(out / f"per_material_{metric}.csv", per_material_table(mx, "csv"))
         write_text(out / f"pareto_{metric}.csv", pareto_table(par, "csv"))
+        write_text(out / f"families_{metric}.csv", family_table(mx, "csv"))
         fig = rank_matrix_figure(mx, agg)
         save_figure(fig, out / f"rank_matrix_{metric}.png", dpi=90)
         plt.close(fig)
@@ -124,6 +126,9 @@ def write_report(sweep_dir: str | os.PathLike[str], *, n_boot: int = 1000, seed:
             aggregate_table(agg),
             f"![rank matrix](rank_matrix_{metric}.png)",
             "",
+            "### Best models per material family",
+            "",
+            family_table(mx),
             "### Fit error against run time",
             "",
             pareto_table(par),

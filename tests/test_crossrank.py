@@ -8,6 +8,7 @@ import pytest
 from brdffit.crossrank import (
     aggregate,
     aggregate_table,
+    family_table,
     load_sweep,
     material_order,
     matrices,
@@ -157,3 +158,15 @@ def test_materials_are_clustered_by_rank_vector_within_a_family(tmp_path):
     )
     labels = [t.get_text() for t in rank_matrix_figure(mx).axes[0].get_yticklabels()]
     assert [t.split(": ")[1] for t in labels] == order
+
+
+def test_family_table_lists_each_familys_best_models_by_mean_rank(tmp_path):
+    mx = matrices(load_sweep(make_sweep(tmp_path / "s")), "low_e2")
+    text = family_table(mx, top=2)
+    # one material per family in the fixture: its ranks are the family's mean ranks
+    assert "| metallic paint | 1 | a (1.00) | b (2.00) |" in text
+    assert "| plastic/phenolic | 1 | b (1.00) | a (2.00) |" in text
+    assert "| fabric | 1 | a (1.00) | b (2.00) |" in text  # b did not converge: last
+    assert (
+        family_table(mx, "csv", top=2).splitlines()[0] == "family,n,#1 (mean rank),#2 (mean rank)"
+    )
