@@ -11,7 +11,7 @@ summary line are printed at the end and written to ``OUT/table.md``.
 
 Run: python3 benchmarks/stability.py --out stress-out [--models walter,lambert | all]
          [--metrics low_e2,ngan] [--regimes baseline,near_mirror | all] [--starts 20]
-         [--samples 2000] [--max-steps 256] [--jobs N]
+         [--samples 2000] [--max-steps 512] [--jobs N]
      python3 benchmarks/stability.py --out stress-out --table     # table from existing JSON
      python3 benchmarks/stability.py --out stress-out --rescore   # re-classify, no refit
 """

@@ -516,7 +516,7 @@ def fit(
     n_restarts: int = 1,
     screen: int = 32,
     seed: int = 0,
-    max_steps: int = 256,
+    max_steps: int = 512,
     rtol: float = 1e-10,
     atol: float = 1e-12,
     errors: str = "sandwich",

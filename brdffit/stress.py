@@ -79,7 +79,7 @@ EXPONENT_RANGE = (1e4, 1e5)
 DYNAMIC_RANGE = 1e7
 RECOVERY_TARGET = 0.95
 DEFAULT_METRICS = ("low_e2", "ngan")
-MAX_STEPS = 256  # LM steps per descent: brdffit.fit's default
+MAX_STEPS = 512  # LM steps per descent: brdffit.fit's default
 STALL_DISTANCE = 0.1  # optimiser-space distance under which a converged miss is a stall
 START_U = 3.0  # random starts: u ~ U(-START_U, START_U) in each parameter's optimiser space
 

@@ -362,7 +362,7 @@ def run_sweep(
     n_restarts: int = 1,
     screen: int = 32,
     seed: int = 0,
-    max_steps: int = 256,
+    max_steps: int = 512,
     eval_n: int = 65536,
     jobs: int | None = None,
     progress: bool = True,
