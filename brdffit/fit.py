@@ -162,7 +162,8 @@ _STALL = 1e-9  # relative loss decrease over a chunk below which a descent has c
 _CHUNK = 8  # LM steps between two looks for parameters saturated at a bound
 _FINISH_CHUNK = 4  # the same when finishing on all samples from the coarse optimum
 _PIN_U = 40.0  # |u| of a pinned scalar: sigmoid(40) is 1 - 4e-18, the bound itself
-_PROBE_U = 12.0  # |u| where a pinned scalar is probed for a gradient pointing inward
+_SATURATED_U = 12.0  # |u| beyond which a bounded transform is within 6e-6 of its bound
+_PROBE_U = _SATURATED_U  # |u| where a pinned scalar is probed for a gradient pointing inward
 _RESUME_U = 8.0  # |u| a released scalar resumes from
 _DAMP_UP = 1e-2  # residual scale factor (damping x 1e4) after a chunk that went nowhere
 
@@ -250,7 +251,7 @@ class _Problem:
             steps, loss = steps + int(k), float(loss)
             if res != optx.RESULTS.nonlinear_max_steps_reached:
                 break
-            sat = bounded & active & (np.abs(np.asarray(u)) > 12.0)
+            sat = bounded & active & (np.abs(np.asarray(u)) > _SATURATED_U)
             if not sat.any() and previous - loss <= _STALL * abs(loss):
                 if self._gain(u, prep, active) <= _STALL * max(self._cost(u, prep), floor):
                     res = optx.RESULTS.successful

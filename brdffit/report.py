@@ -2,9 +2,9 @@
 
 ``write_report(sweep_dir)`` writes ``<sweep_dir>/report/report.md`` and beside it,
 per metric, the CSV tables (``aggregate_<metric>.csv``, ``per_material_<metric>.csv``,
-``pareto_<metric>.csv``, ``families_<metric>.csv``) and the figures (``rank_matrix_<metric>.png``,
-``pareto_<metric>.png``). The text holds no date and no absolute path and the
-bootstrap is seeded, so the same JSON files give the same report.
+``pareto_<metric>.csv``, ``families_<metric>.csv``) and the figures
+(``rank_matrix_<metric>.png``, ``pareto_<metric>.png``). The text holds no date and no
+absolute path and the bootstrap is seeded, so the same JSON files give the same report.
 """
 
 from __future__ import annotations

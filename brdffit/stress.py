@@ -95,7 +95,8 @@ class Regime:
     their bounds), ``correlated`` (multi-lobe models, or a broad lobe); data:
     ``directions`` (``"rusinkiewicz"`` or ``"grazing"``), ``noise_mult`` (log-normal),
     ``missing`` (fraction of cells invalid), ``outliers`` (fraction of cells multiplied
-    by ``outlier_factor``), ``float32`` (the model evaluated in float32); fit:
+    by ``outlier_factor``), ``float32`` (data made by the model evaluated in float32;
+    the fit itself runs in float64, as :class:`Measurements` holds float64); fit:
     ``cut_deg`` and ``robust``.
     """
 

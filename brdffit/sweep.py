@@ -225,28 +225,42 @@ def eval_cost(model, params: dict, data, *, n: int = 65536, repeats: int = 3) ->
     return float(best / n * 1e9)
 
 
+def checkout_commit(package_dir: Path) -> str | None:
+    """``git describe --always --dirty`` of the checkout whose top level holds
+    ``package_dir`` as ``<top>/<package name>``; ``None`` when there is none (an
+    installed copy, possibly inside some other repository, which it must not report)."""
+    import subprocess
+
+    def git(*args: str) -> str:
+        return subprocess.run(
+            ["git", "-C", str(package_dir), *args],
+            capture_output=True, text=True, timeout=10, check=True,
+        ).stdout.strip()  # fmt: skip
+
+    try:
+        top = Path(git("rev-parse", "--show-toplevel")).resolve()
+        if top / package_dir.name != package_dir.resolve():
+            return None
+        return git("describe", "--always", "--dirty") or None
+    except (OSError, subprocess.SubprocessError):
+        return None
+
+
 @functools.cache
 def provenance() -> dict:
     """Where a result was computed: brdffit version and git commit, JAX backend, device.
 
     Results from different fitter versions or devices must not be mixed unknowingly
-    in one report; the commit (``-dirty`` with uncommitted changes) is read from git,
-    else from ``$BRDFFIT_GIT_DESCRIBE`` (an installed copy), else ``None``.
+    in one report; the commit (``-dirty`` with uncommitted changes) is
+    :func:`checkout_commit` of the package, else ``$BRDFFIT_GIT_DESCRIBE`` (set by
+    whoever installed a copy), else ``None``.
     """
-    import subprocess
-
     import jax
 
     import brdffit
 
     here = Path(brdffit.__file__).resolve().parent
-    try:
-        commit = subprocess.run(
-            ["git", "-C", str(here), "describe", "--always", "--dirty"],
-            capture_output=True, text=True, timeout=10, check=True,
-        ).stdout.strip() or None  # fmt: skip
-    except (OSError, subprocess.SubprocessError):  # an installed copy: the builder may say
-        commit = os.environ.get("BRDFFIT_GIT_DESCRIBE") or None
+    commit = checkout_commit(here) or os.environ.get("BRDFFIT_GIT_DESCRIBE") or None
     return {
         "brdffit": getattr(brdffit, "__version__", None),
         "git": commit,
@@ -276,7 +290,7 @@ def run_task(task: Task, out: str) -> dict:
             task.metric,
             cut_deg=s["cut_deg"],
             n_restarts=s["n_restarts"],
-            screen=s.get("screen", 0),  # sweeps made before the screen existed had none
+            screen=s["screen"],
             seed=s["seed"],
             max_steps=s["max_steps"],
             throw=False,

@@ -23,7 +23,7 @@ from brdffit import models
 from brdffit.cli import main
 from brdffit.crossrank import load_sweep, matrices
 from brdffit.errors import ParameterError, SweepError
-from brdffit.sweep import Material, file_stem, run_sweep, synthetic_materials
+from brdffit.sweep import Material, checkout_commit, file_stem, run_sweep, synthetic_materials
 
 ROOT = Path(__file__).resolve().parents[1]
 ARGS = dict(stride=(15, 15, 15), n_restarts=0, eval_n=4096)
@@ -265,3 +265,20 @@ def test_sweep_cli_splits_models_outside_brackets(tmp_path, monkeypatch, capsys)
     assert main([*argv, "--models", "walter,lafortune[n_lobes=2,anisotropic=true]"]) == 0
     assert seen["models"] == ["walter", "lafortune[n_lobes=2,anisotropic=true]"]
     capsys.readouterr()
+
+
+def test_checkout_commit_reports_only_the_packages_own_checkout(tmp_path):
+    def git(*args):
+        subprocess.run(["git", "-C", str(tmp_path), *args], check=True, capture_output=True)
+
+    (tmp_path / "brdffit").mkdir()
+    (tmp_path / "brdffit" / "__init__.py").write_text("")
+    (tmp_path / "site" / "brdffit").mkdir(parents=True)
+    git("init", "-q")
+    git("add", "-A")
+    git("-c", "user.name=t", "-c", "user.email=t@t", "commit", "-qm", "x")
+    own = checkout_commit(tmp_path / "brdffit")
+    assert own is not None and len(own) >= 7
+    assert checkout_commit(tmp_path / "site" / "brdffit") is None  # a copy inside a repo
+    (tmp_path / "brdffit" / "__init__.py").write_text("changed = 1\n")
+    assert checkout_commit(tmp_path / "brdffit") == own + "-dirty"
