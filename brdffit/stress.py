@@ -5,7 +5,8 @@ drawn from the model's baseline parameters (:data:`ROLES`, jittered with the cas
 seed) and changed as the regime says; the data are synthesised from it; then the model
 is fitted once from the truth (the *reference*) and from ``n_starts`` seeded random
 starts (``init=`` a random natural point, ``n_restarts=0``; the fit's own screen of
-spread candidates still adds its one start, as it does in use).
+spread candidates still adds its one start, as it does in use, seeded with the start's
+number so that the screen too differs from start to start).
 
 **Recovery.** A start is recovered when its fit is finite, converged (``Status.CONVERGED``)
 and its final objective ``J`` (``0.5 sum rho(r)^2``, what LM minimises: the metric's
@@ -635,9 +636,17 @@ def _finite_params(params: dict) -> bool:
 
 
 def _one_fit(
-    model, data, metric: str, regime: Regime, spec: CaseSpec, init: dict, scale, max_steps: int
+    model,
+    data,
+    metric: str,
+    regime: Regime,
+    spec: CaseSpec,
+    init: dict,
+    scale,
+    max_steps: int,
+    seed: int = 0,
 ):
-    """Run one fit; returns (record dict, FitResult or None)."""
+    """Run one fit (``seed`` seeds its screen); returns (record dict, FitResult or None)."""
 
     t0 = time.perf_counter()
     try:
@@ -649,6 +658,7 @@ def _one_fit(
             freeze=spec.freeze or None,
             cut_deg=regime.cut_deg,
             n_restarts=0,
+            seed=seed,
             robust=regime.robust,
             robust_scale=scale,
             max_steps=max_steps,
@@ -764,7 +774,7 @@ def run_case(
     starts = []
     for i, rng in enumerate(rng_starts):
         init = random_start(model, spec.freeze, rng)
-        rec, _ = _one_fit(model, data, metric, regime, spec, init, scale, max_steps)
+        rec, _ = _one_fit(model, data, metric, regime, spec, init, scale, max_steps, seed=i + 1)
         rec["seed"] = i
         rec["init"] = {k: np.asarray(v).tolist() for k, v in init.items()}
         starts.append(rec)
