@@ -99,6 +99,12 @@ _cost = eqx.filter_jit(_cost_at)
 
 
 @eqx.filter_jit
+def _zero_cost(metric, robust, prep, scale):
+    """``0.5 sum rho(r)^2`` of the zero BRDF: the data's own energy in the metric."""
+    return metrics_mod.objective(metric, jnp.zeros_like(prep.values), prep, robust, scale)
+
+
+@eqx.filter_jit
 def _cost_gradient(model, free, metric, robust, u, prep, frozen, scale):
     """Gradient of :func:`_cost_at` with respect to ``u``."""
     return jax.grad(lambda v: _cost_at(model, free, metric, robust, v, prep, frozen, scale))(u)
@@ -158,13 +164,16 @@ def _plain_residuals(model, free, metric, u, prep, frozen):
 _TAU = 1e-3  # initial LM damping relative to the largest diagonal entry of J^T J
 _LOCAL = 1e-3  # relative loss decrease per chunk below which the columns are scaled
 _COL_FLOOR = 1e-8  # smallest column scale: a column 1e-8 of the largest is left that small
+_EXACT = 1e-16  # cost / the zero BRDF's cost at which the data count as reproduced exactly
 _STALL = 1e-9  # relative loss decrease over a chunk below which a descent has converged
 _CHUNK = 8  # LM steps between two looks for parameters saturated at a bound
 _FINISH_CHUNK = 4  # the same when finishing on all samples from the coarse optimum
 _TAIL_U = 4.0  # |u| beyond which a bounded transform is in its tail (2% of the span)
 _PIN_U = 40.0  # |u| of a pinned scalar: sigmoid(40) is 1 - 4e-18, the bound itself
 _SATURATED_U = 12.0  # |u| beyond which a bounded transform is within 6e-6 of its bound
-_PROBE_U = _SATURATED_U  # |u| where a pinned scalar is probed for a gradient pointing inward
+# |u| where a pinned scalar is probed for a gradient pointing inward: at the saturation
+# threshold, and 2e-9 of the span from the bound for an optimum deep in the tail
+_PROBE_U = (_SATURATED_U, 2 * _SATURATED_U)
 _RESUME_U = 8.0  # |u| a released scalar resumes from
 _RACE = 8  # cheapest screened candidates raced for one chunk of LM steps
 _DAMP_UP = 1e-2  # residual scale factor (damping x 1e4) after a chunk that went nowhere
@@ -205,11 +214,13 @@ class _Problem:
 
         Bounded transforms flatten towards a bound, so a parameter whose optimum lies on
         the bound creeps there by ~1 unit of ``u`` per step while the loss stops moving.
-        Each chunk that ends unfinished pins such scalars (``|u| > 12``) on their bound
-        and the others go on. At the end, a pinned scalar whose cost falls when it is
-        moved back inside (probed at ``|u| = 12``, 6e-6 of the span from the bound) is
-        released and the descent resumes, as long as that lowers the loss: a pin must be
-        a Karush-Kuhn-Tucker point, not an accident of the path.
+        Each chunk that ends unfinished pins such scalars (``|u| > 12``) on their bound,
+        unless that raises the cost (an optimum inside the tail: a diffuse albedo of 3e-6
+        under a peak 1e7 times brighter sits at ``u = -12.7``), and the others go on. At
+        the end, a pinned scalar whose cost falls when it is moved back inside (probed at
+        ``|u| = 12`` and 24, 6e-6 and 4e-11 of the span from the bound) is released and
+        the descent resumes, as long as that lowers the loss: a pin must be a Karush-Kuhn-Tucker
+        point, not an accident of the path.
         """
         d = self._chunks(u0, prep, active.copy(), max_steps, 0, chunk)
         while d.steps < max_steps:
@@ -236,6 +247,11 @@ class _Problem:
         has converged (scipy's ``ftol`` is 1e-8 per step); otherwise the next chunk
         starts with the damping raised by ``1 / _DAMP_UP^2``.
 
+        A chunk that leaves the cost below ``_EXACT`` times the zero BRDF's cost (residuals
+        ~1e-8 of the data's own) has converged too: noise-free data are reproduced, and
+        where ``J`` is near-singular at such a fit LM goes on shrinking the cost by a
+        constant factor per step without ever meeting its step tolerance.
+
         The columns of ``J`` are scaled (:func:`_scales`) once a chunk lowers the loss by
         less than ``_LOCAL`` (relative): near the minimum, where LM's quadratic model
         holds, uniform damping would make weakly-sensitive parameters crawl; far from
@@ -245,6 +261,7 @@ class _Problem:
         bounded = _bounded(self.layout)
         previous, damp, scaled = math.inf, 1.0, False
         floor = 1e-15 * self._cost(u, prep)  # a zero-residual fit's cost is rounding
+        exact = _EXACT * self._zero_cost(prep)
         while True:
             before = np.abs(np.asarray(u))
             rscale, cscale = self.scales(u, prep, active)
@@ -252,6 +269,9 @@ class _Problem:
             u, res, k, loss = self.solve(u, prep, active, chunk, rscale * damp, cscale)
             steps, loss = steps + int(k), float(loss)
             if res != optx.RESULTS.nonlinear_max_steps_reached:
+                break
+            if self._cost(u, prep) <= exact:
+                res = optx.RESULTS.successful  # the data are reproduced to 8 digits
                 break
             sat = bounded & active & (np.abs(np.asarray(u)) > _SATURATED_U)
             if not sat.any() and previous - loss <= _STALL * abs(loss):
@@ -261,15 +281,15 @@ class _Problem:
                 damp = damp * _DAMP_UP
             if steps >= max_steps:
                 break
-            if sat.any():
-                u = jnp.where(jnp.asarray(sat), jnp.sign(u) * _PIN_U, u)
-                active = active & ~sat
             outward = np.abs(np.asarray(u)) > before + 1e-3
-            u, active = self._probe_pins(u, prep, active, bounded & outward)
+            u, active = self._probe_pins(u, prep, active, bounded & (outward | sat))
             tail = active & bounded & outward & (np.abs(np.asarray(u)) > _TAIL_U)
             scaled = scaled or previous - loss < _LOCAL * abs(loss) or bool(tail.any())
             previous = loss
         return _Descent(u, res, steps, loss, active)
+
+    def _zero_cost(self, prep) -> float:
+        return float(_zero_cost(self.metric, self.robust, prep, jnp.asarray(self.scale)))
 
     def _cost(self, u, prep) -> float:
         free, scale = self.layout.free, jnp.asarray(self.scale)
@@ -291,7 +311,10 @@ class _Problem:
 
         A bounded transform flattens as ``e^-|u|`` towards its bound, so LM approaches a
         bound optimum at a crawl (hundreds of steps for an albedo going to 0). Jumping
-        to the bound is tried one scalar at a time; :meth:`_released` later undoes any
+        to the bound is tried one scalar at a time, and kept when the cost does not rise
+        and, next to the bound (``|u| = 24``), does not fall inward: an optimum deep in
+        the tail (an albedo of 3e-6) is closer to the bound than to a scalar still on
+        its way, so the cost test alone would pin it. :meth:`_released` later undoes any
         pin that turns out not to be a Karush-Kuhn-Tucker point.
         """
         near = active & bounded & (np.abs(np.asarray(u)) > _TAIL_U)
@@ -302,24 +325,37 @@ class _Problem:
         for i in np.flatnonzero(near):
             trial = u.at[i].set(jnp.sign(u[i]) * _PIN_U)
             cost = self._cost(trial, prep)
-            if cost <= here:
+            if cost <= here and not self._inward(trial, prep, int(i)):
                 u, here = trial, cost
                 active[i] = False
         return u, active
+
+    def _inward(self, u, prep, i: int) -> bool:
+        """Does the cost fall when scalar ``i``, pinned in ``u``, moves inward from
+        ``|u| = 24`` (4e-11 of the span from its bound)?"""
+        probe = u.at[i].set(jnp.sign(u[i]) * _PROBE_U[-1])
+        g = _cost_gradient(
+            self.model, self.layout.free, self.metric, self.robust, probe, prep, self.frozen,
+            jnp.asarray(self.scale),
+        )  # fmt: skip
+        return bool(g[i] * jnp.sign(u[i]) > 0)
 
     def _released(self, u, prep, active: np.ndarray) -> np.ndarray:
         pinned = ~active
         if not pinned.any():
             return pinned
-        probe = jnp.where(jnp.asarray(pinned), jnp.sign(u) * _PROBE_U, u)
-        g = np.asarray(
-            _cost_gradient(
-                self.model, self.layout.free, self.metric, self.robust, probe, prep,
-                self.frozen, jnp.asarray(self.scale),
-            )
-        )  # fmt: skip
-        # moving inward lowers u's magnitude: the cost falls inward when g * sign(u) > 0
-        return pinned & (g * np.sign(np.asarray(u)) > 0)
+        inward = np.zeros_like(pinned)
+        for at in _PROBE_U:
+            probe = jnp.where(jnp.asarray(pinned), jnp.sign(u) * at, u)
+            g = np.asarray(
+                _cost_gradient(
+                    self.model, self.layout.free, self.metric, self.robust, probe, prep,
+                    self.frozen, jnp.asarray(self.scale),
+                )
+            )  # fmt: skip
+            # moving inward lowers u's magnitude: the cost falls inward when g * sign(u) > 0
+            inward |= g * np.sign(np.asarray(u)) > 0
+        return pinned & inward
 
 
 @dataclass(frozen=True)

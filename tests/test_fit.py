@@ -157,3 +157,27 @@ def test_unidentified_parameters_are_named():
     named = {label.split("[")[0] for label in r.not_identified}
     assert named & set(case.not_identifiable), (named, case.not_identifiable)
     assert any(n in w for w in r.warnings for n in named)
+
+
+def test_an_optimum_on_the_upper_bound_is_reached_without_a_crawl():
+    # Oren-Nayar with rho = (0, 0.49, 1): before the columns were scaled for a scalar
+    # crawling in its tail, the fit from the truth itself moved rho[b] by 0.013 in u per
+    # chunk and stopped unconverged after 512 steps.
+    on = models.get("oren_nayar")
+    truth = {"rho": [0.0, 0.4857, 1.0], "sigma": 0.3917}
+    data = synthesize(on, truth, grid="random", n=2000, seed=3)
+    r = fit(on, data, "low_e2", init=truth, n_restarts=0, screen=0)
+    assert r.converged and r.n_steps <= 128, (r.status, r.n_steps)
+    assert set(r.at_bound) == {"rho"}
+    np.testing.assert_allclose(r.params["rho"], truth["rho"], atol=1e-9)
+    np.testing.assert_allclose(r.params["sigma"], truth["sigma"], rtol=1e-6)
+
+
+def test_an_albedo_deep_in_its_tail_is_fitted_not_pinned(walter):
+    # kd[r] = 3e-6 sits at u = -12.7, past the saturation threshold |u| = 12: pinning it
+    # on 0 would raise the cost, so it stays free and is recovered.
+    truth = {**TRUTH, "kd": [3e-6, 0.2, 0.3]}
+    data = synthesize(walter, truth, stride=GRID)
+    r = fit(walter, data, "low_e2", init=truth, n_restarts=0, screen=0)
+    assert r.converged and "kd" not in r.at_bound, (r.status, r.at_bound)
+    np.testing.assert_allclose(r.params["kd"], truth["kd"], rtol=1e-4)
