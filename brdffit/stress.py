@@ -181,7 +181,13 @@ class Roles:
     (not identifiable, with the reason, as declared in ``tests/cases*.py``);
     ``two_lobes`` (options, truth) for the correlated regime; ``floor_zero`` parameters
     set to 0 in the dynamic-range regime so that the diffuse parameter scales the diffuse
-    term only (Disney's metallic and tint, Filament's metallic).
+    term only (Disney's metallic and tint, Filament's metallic), and frozen there: with
+    the base colour at 1e-5, metallic moves only F0, which ``specular``/``reflectance``
+    also set, and the diffuse scale, which the base colour also sets (a ridge: the fits
+    reached the minimum's cost along it and crawled); ``narrow`` parameters set when the
+    lobe exponent exceeds 1e3 (Lafortune's ``cxy = -1``: with ``|cxy| > 1`` the lobe
+    grows as ``|cxy|^n`` towards grazing, 1e1000 at ``n = 1e4``, far past the model's
+    ``e^60`` cap; no material does that, and the capped model is flat in ``n``).
     """
 
     truth: dict
@@ -191,6 +197,7 @@ class Roles:
     freeze: dict = field(default_factory=dict)
     two_lobes: tuple[dict, dict] | None = None
     floor_zero: tuple[str, ...] = ()
+    narrow: dict = field(default_factory=dict)
 
 
 _DISNEY_TINT = (
@@ -273,6 +280,7 @@ ROLES: dict[str, Roles] = {
         "n_1",
         "exponent",
         "kd",
+        narrow={"cxy_1": -1.0},
         two_lobes=(
             {"n_lobes": 2},
             {
@@ -462,6 +470,10 @@ def case_spec(model_name: str, regime: Regime) -> CaseSpec:
             notes.append(f"{rough_name} on its upper bound")
         truth[rough_name] = np.asarray(value)
         notes.append(f"{rough_name} = {value:.4g}")
+    if rough_name is not None and roles.kind == "exponent" and truth[rough_name] > 1e3:
+        for k, v in roles.narrow.items():
+            truth[k] = np.asarray(v, float)
+            notes.append(f"{k} = {v:g} (a narrow lobe that stays bounded)")
     if regime.dynamic_range is not None:
         for name in roles.floor_zero:
             truth[name] = np.asarray(0.0)
@@ -482,6 +494,8 @@ def case_spec(model_name: str, regime: Regime) -> CaseSpec:
             truth[rgb[1].name][1] = rgb[1].bounds[0]
         notes.append(", ".join(f"{p.name}={truth[p.name].tolist()}" for p in rgb[:2]))
     freeze = {k: truth[k] for k in roles.freeze if k in truth}
+    if regime.dynamic_range is not None:
+        freeze.update({k: truth[k] for k in roles.floor_zero})
     return CaseSpec(model_name, options, truth, freeze, tuple(notes), seed)
 
 

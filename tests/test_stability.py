@@ -141,3 +141,14 @@ def test_table_renders_from_json(tmp_path):
     line = stress.summary(rows)
     assert line.startswith("2 cases: 1 run, 1 not applicable; 1 identifiable, 1 under 95%")
     assert "walter/low_e2/baseline" in line
+
+
+def test_a_narrow_lafortune_lobe_stays_bounded_and_dynamic_range_freezes_the_ridge():
+    spec = stress.case_spec("lafortune", stress.REGIMES["near_mirror"])
+    assert spec.truth["n_1"] > 1e3 and float(spec.truth["cxy_1"]) == -1.0
+    data, _ = stress.make_data(spec, stress.REGIMES["near_mirror"], 500)
+    ok = np.asarray(data.valid)
+    assert np.all(np.isfinite(data.values[ok])) and np.max(data.values[ok]) < 1e12
+    for name in ("filament", "disney"):
+        spec = stress.case_spec(name, stress.REGIMES["dynamic_range"])
+        assert "metallic" in spec.freeze and float(spec.freeze["metallic"]) == 0.0
