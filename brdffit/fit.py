@@ -171,9 +171,7 @@ _FINISH_CHUNK = 4  # the same when finishing on all samples from the coarse opti
 _TAIL_U = 4.0  # |u| beyond which a bounded transform is in its tail (2% of the span)
 _PIN_U = 40.0  # |u| of a pinned scalar: sigmoid(40) is 1 - 4e-18, the bound itself
 _SATURATED_U = 12.0  # |u| beyond which a bounded transform is within 6e-6 of its bound
-# |u| where a pinned scalar is probed for a gradient pointing inward: at the saturation
-# threshold, and 2e-9 of the span from the bound for an optimum deep in the tail
-_PROBE_U = (_SATURATED_U, 2 * _SATURATED_U)
+_PROBE_U = _SATURATED_U  # |u| where a pinned scalar is probed for a gradient pointing inward
 _RESUME_U = 8.0  # |u| a released scalar resumes from
 _RACE = 8  # cheapest screened candidates raced for one chunk of LM steps
 _DAMP_UP = 1e-2  # residual scale factor (damping x 1e4) after a chunk that went nowhere
@@ -214,13 +212,11 @@ class _Problem:
 
         Bounded transforms flatten towards a bound, so a parameter whose optimum lies on
         the bound creeps there by ~1 unit of ``u`` per step while the loss stops moving.
-        Each chunk that ends unfinished pins such scalars (``|u| > 12``) on their bound,
-        unless that raises the cost (an optimum inside the tail: a diffuse albedo of 3e-6
-        under a peak 1e7 times brighter sits at ``u = -12.7``), and the others go on. At
-        the end, a pinned scalar whose cost falls when it is moved back inside (probed at
-        ``|u| = 12`` and 24, 6e-6 and 4e-11 of the span from the bound) is released and
-        the descent resumes, as long as that lowers the loss: a pin must be a Karush-Kuhn-Tucker
-        point, not an accident of the path.
+        Each chunk that ends unfinished pins such scalars (``|u| > 12``) on their bound
+        and the others go on. At the end, a pinned scalar whose cost falls when it is
+        moved back inside (probed at ``|u| = 12``, 6e-6 of the span from the bound) is
+        released and the descent resumes, as long as that lowers the loss: a pin must be
+        a Karush-Kuhn-Tucker point, not an accident of the path.
         """
         d = self._chunks(u0, prep, active.copy(), max_steps, 0, chunk)
         while d.steps < max_steps:
@@ -281,8 +277,11 @@ class _Problem:
                 damp = damp * _DAMP_UP
             if steps >= max_steps:
                 break
+            if sat.any():
+                u = jnp.where(jnp.asarray(sat), jnp.sign(u) * _PIN_U, u)
+                active = active & ~sat
             outward = np.abs(np.asarray(u)) > before + 1e-3
-            u, active = self._probe_pins(u, prep, active, bounded & (outward | sat))
+            u, active = self._probe_pins(u, prep, active, bounded & outward)
             tail = active & bounded & outward & (np.abs(np.asarray(u)) > _TAIL_U)
             scaled = scaled or previous - loss < _LOCAL * abs(loss) or bool(tail.any())
             previous = loss
@@ -311,10 +310,7 @@ class _Problem:
 
         A bounded transform flattens as ``e^-|u|`` towards its bound, so LM approaches a
         bound optimum at a crawl (hundreds of steps for an albedo going to 0). Jumping
-        to the bound is tried one scalar at a time, and kept when the cost does not rise
-        and, next to the bound (``|u| = 24``), does not fall inward: an optimum deep in
-        the tail (an albedo of 3e-6) is closer to the bound than to a scalar still on
-        its way, so the cost test alone would pin it. :meth:`_released` later undoes any
+        to the bound is tried one scalar at a time; :meth:`_released` later undoes any
         pin that turns out not to be a Karush-Kuhn-Tucker point.
         """
         near = active & bounded & (np.abs(np.asarray(u)) > _TAIL_U)
@@ -325,37 +321,24 @@ class _Problem:
         for i in np.flatnonzero(near):
             trial = u.at[i].set(jnp.sign(u[i]) * _PIN_U)
             cost = self._cost(trial, prep)
-            if cost <= here and not self._inward(trial, prep, int(i)):
+            if cost <= here:
                 u, here = trial, cost
                 active[i] = False
         return u, active
-
-    def _inward(self, u, prep, i: int) -> bool:
-        """Does the cost fall when scalar ``i``, pinned in ``u``, moves inward from
-        ``|u| = 24`` (4e-11 of the span from its bound)?"""
-        probe = u.at[i].set(jnp.sign(u[i]) * _PROBE_U[-1])
-        g = _cost_gradient(
-            self.model, self.layout.free, self.metric, self.robust, probe, prep, self.frozen,
-            jnp.asarray(self.scale),
-        )  # fmt: skip
-        return bool(g[i] * jnp.sign(u[i]) > 0)
 
     def _released(self, u, prep, active: np.ndarray) -> np.ndarray:
         pinned = ~active
         if not pinned.any():
             return pinned
-        inward = np.zeros_like(pinned)
-        for at in _PROBE_U:
-            probe = jnp.where(jnp.asarray(pinned), jnp.sign(u) * at, u)
-            g = np.asarray(
-                _cost_gradient(
-                    self.model, self.layout.free, self.metric, self.robust, probe, prep,
-                    self.frozen, jnp.asarray(self.scale),
-                )
-            )  # fmt: skip
-            # moving inward lowers u's magnitude: the cost falls inward when g * sign(u) > 0
-            inward |= g * np.sign(np.asarray(u)) > 0
-        return pinned & inward
+        probe = jnp.where(jnp.asarray(pinned), jnp.sign(u) * _PROBE_U, u)
+        g = np.asarray(
+            _cost_gradient(
+                self.model, self.layout.free, self.metric, self.robust, probe, prep,
+                self.frozen, jnp.asarray(self.scale),
+            )
+        )  # fmt: skip
+        # moving inward lowers u's magnitude: the cost falls inward when g * sign(u) > 0
+        return pinned & (g * np.sign(np.asarray(u)) > 0)
 
 
 @dataclass(frozen=True)
