@@ -252,7 +252,9 @@ class _Problem:
         less than ``_LOCAL`` (relative): near the minimum, where LM's quadratic model
         holds, uniform damping would make weakly-sensitive parameters crawl; far from
         it, scaling would let those same parameters leap across their transforms'
-        tails and be pinned on the wrong bound.
+        tails and be pinned on the wrong bound. They are scaled as well once a free
+        bounded scalar moved outward deep in its tail (``|u| > 4``) and pinning it did
+        not lower the cost: uniform damping then moves it ~0.01 in ``u`` per chunk.
         """
         bounded = _bounded(self.layout)
         previous, damp, scaled = math.inf, 1.0, False
