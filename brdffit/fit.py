@@ -494,11 +494,11 @@ def _screened_start(
         )
         cost = problem._cost(layout.unconstrained(c), prep)
         if math.isfinite(cost):
-            scored.append((cost, len(scored), c))
-    scored.sort(key=lambda t: t[:2])
+            scored.append((cost, c))
+    scored.sort(key=lambda t: t[0])  # stable: equal costs keep their draw order
     best, best_loss = None, math.inf
     everywhere = np.ones(layout.size, bool)
-    for _, _, c in scored[:_RACE]:
+    for _, c in scored[:_RACE]:
         d = problem.descend(layout.unconstrained(c), prep, everywhere, _CHUNK)
         loss = d.loss if math.isfinite(d.loss) else math.inf
         if best is None or loss < best_loss:
