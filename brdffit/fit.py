@@ -99,6 +99,12 @@ _cost = eqx.filter_jit(_cost_at)
 
 
 @eqx.filter_jit
+def _loss_at(model, free, metric, u, prep, frozen):
+    """The metric's own loss at the unconstrained ``u`` (what :func:`_solve` reports)."""
+    return metrics_mod.loss(metric, model.evaluate(_natural(free, u, frozen), prep.g), prep)
+
+
+@eqx.filter_jit
 def _zero_cost(metric, robust, prep, scale):
     """``0.5 sum rho(r)^2`` of the zero BRDF: the data's own energy in the metric."""
     return metrics_mod.objective(metric, jnp.zeros_like(prep.values), prep, robust, scale)
@@ -255,6 +261,9 @@ class _Problem:
         tails and be pinned on the wrong bound. They are scaled as well once a free
         bounded scalar moved outward deep in its tail (``|u| > 4``) and pinning it did
         not lower the cost: uniform damping then moves it ~0.01 in ``u`` per chunk.
+
+        After every unfinished chunk the linear parameters are solved for the current
+        nonlinear ones (:meth:`_project`, variable projection by alternation).
         """
         bounded = _bounded(self.layout)
         previous, damp, scaled = math.inf, 1.0, False
@@ -286,8 +295,42 @@ class _Problem:
             u, active = self._probe_pins(u, prep, active, bounded & outward)
             tail = active & bounded & outward & (np.abs(np.asarray(u)) > _TAIL_U)
             scaled = scaled or previous - loss < _LOCAL * abs(loss) or bool(tail.any())
+            projected = self._project(u, prep, active)
+            if projected is not None:
+                u, loss = projected
             previous = loss
         return _Descent(u, res, steps, loss, active)
+
+    def _project(self, u, prep, active: np.ndarray) -> tuple[jax.Array, float] | None:
+        """``(u, loss)`` with the active linear scalars re-solved, or None if that does not
+        lower the cost.
+
+        A near-mirror lobe makes its columns of ``J`` ~1e5 times an albedo's, so under
+        LM's uniform damping the albedo moves ~1e-2 in ``u`` per chunk: a fit ends after
+        512 steps with every nonlinear parameter right to 6 digits and ``kd`` 30% off
+        (Cook-Torrance, Walter and Kurt near a mirror, Low at grazing angles, Ngan
+        metric). The model is affine in the linear parameters, so their weighted least
+        squares solution (:func:`_linear_solve`; first order for log metrics) is one
+        step away; it is kept only when the cost (robust, if any) falls.
+        """
+        lin = self._linear & active
+        if not lin.any():
+            return None
+        params = _natural(self.layout.free, u, self.frozen)
+        solved = _with_linear_start(self.model, self.metric, self.layout, params, prep)
+        if solved is params:
+            return None
+        trial = jnp.where(jnp.asarray(lin), self.layout.unconstrained(solved), u)
+        if not self._cost(trial, prep) < self._cost(u, prep):
+            return None
+        free = self.layout.free
+        loss = _loss_at(self.model, free, self.metric, trial, prep, self.frozen)
+        return trial, float(loss)
+
+    @property
+    def _linear(self) -> np.ndarray:
+        parts = [np.full(p.size, p.linear) for p in self.layout.free]
+        return np.concatenate(parts) if parts else np.zeros(0, bool)
 
     def _zero_cost(self, prep) -> float:
         return float(_zero_cost(self.metric, self.robust, prep, jnp.asarray(self.scale)))
