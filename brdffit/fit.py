@@ -99,12 +99,6 @@ _cost = eqx.filter_jit(_cost_at)
 
 
 @eqx.filter_jit
-def _loss_at(model, free, metric, u, prep, frozen):
-    """The metric's own loss at the unconstrained ``u`` (what :func:`_solve` reports)."""
-    return metrics_mod.loss(metric, model.evaluate(_natural(free, u, frozen), prep.g), prep)
-
-
-@eqx.filter_jit
 def _zero_cost(metric, robust, prep, scale):
     """``0.5 sum rho(r)^2`` of the zero BRDF: the data's own energy in the metric."""
     return metrics_mod.objective(metric, jnp.zeros_like(prep.values), prep, robust, scale)
@@ -180,7 +174,6 @@ _SATURATED_U = 12.0  # |u| beyond which a bounded transform is within 6e-6 of it
 _PROBE_U = _SATURATED_U  # |u| where a pinned scalar is probed for a gradient pointing inward
 _RESUME_U = 8.0  # |u| a released scalar resumes from
 _RACE = 8  # cheapest screened candidates raced for one chunk of LM steps
-_SMALL_COLUMN = 1e-3  # a linear scalar's column of J, relative to the largest, that crawls
 _DAMP_UP = 1e-2  # residual scale factor (damping x 1e4) after a chunk that went nowhere
 
 
@@ -262,10 +255,6 @@ class _Problem:
         tails and be pinned on the wrong bound. They are scaled as well once a free
         bounded scalar moved outward deep in its tail (``|u| > 4``) and pinning it did
         not lower the cost: uniform damping then moves it ~0.01 in ``u`` per chunk.
-
-        After an unfinished chunk that began with some linear scalar's column of ``J``
-        under ``_SMALL_COLUMN`` of the largest, the linear parameters are solved for the
-        current nonlinear ones (:meth:`_project`, variable projection by alternation).
         """
         bounded = _bounded(self.layout)
         previous, damp, scaled = math.inf, 1.0, False
@@ -273,8 +262,8 @@ class _Problem:
         exact = _EXACT * self._zero_cost(prep)
         while True:
             before = np.abs(np.asarray(u))
-            rscale, columns = self.scales(u, prep, active)
-            cscale = columns if scaled else 1.0
+            rscale, cscale = self.scales(u, prep, active)
+            cscale = cscale if scaled else 1.0
             u, res, k, loss = self.solve(u, prep, active, chunk, rscale * damp, cscale)
             steps, loss = steps + int(k), float(loss)
             if res != optx.RESULTS.nonlinear_max_steps_reached:
@@ -297,51 +286,8 @@ class _Problem:
             u, active = self._probe_pins(u, prep, active, bounded & outward)
             tail = active & bounded & outward & (np.abs(np.asarray(u)) > _TAIL_U)
             scaled = scaled or previous - loss < _LOCAL * abs(loss) or bool(tail.any())
-            small = active & self._linear & (np.asarray(columns) < _SMALL_COLUMN)
-            projected = self._project(u, prep, small) if small.any() else None
-            if projected is not None:
-                u, loss = projected
             previous = loss
         return _Descent(u, res, steps, loss, active)
-
-    def _project(self, u, prep, active: np.ndarray) -> tuple[jax.Array, float] | None:
-        """``(u, loss)`` with the active linear scalars re-solved, or None if that does not
-        lower the cost.
-
-        A near-mirror lobe makes its columns of ``J`` ~1e5 times an albedo's, so under
-        LM's uniform damping the albedo moves ~1e-2 in ``u`` per chunk: a fit ends after
-        512 steps with every nonlinear parameter right to 6 digits and ``kd`` 30% off
-        (Cook-Torrance, Walter and Kurt near a mirror, Low at grazing angles, Ngan
-        metric). The model is affine in the linear parameters, so their weighted least
-        squares solution (:func:`_linear_solve`; first order for log metrics) is one
-        step away. It is kept only when it lowers the cost (robust, if any) by more than
-        ``_LOCAL``: near a minimum LM is already converging on all parameters together,
-        and small jumps of the linear ones alone only disturb it (Disney baseline:
-        recovery 90% -> 80% when every lower cost was kept).
-        """
-        lin = self._linear & active
-        if not lin.any():
-            return None
-        params = _natural(self.layout.free, u, self.frozen)
-        solved = _with_linear_start(self.model, self.metric, self.layout, params, prep)
-        if solved is params:
-            return None
-        v = self.layout.unconstrained(solved)
-        lin = lin & (np.abs(np.asarray(v)) < _TAIL_U)  # clipped or in a tail: left to LM
-        if not lin.any():
-            return None
-        trial = jnp.where(jnp.asarray(lin), v, u)
-        here = self._cost(u, prep)
-        if not self._cost(trial, prep) < (1.0 - _LOCAL) * here:
-            return None
-        free = self.layout.free
-        loss = _loss_at(self.model, free, self.metric, trial, prep, self.frozen)
-        return trial, float(loss)
-
-    @property
-    def _linear(self) -> np.ndarray:
-        parts = [np.full(p.size, p.linear) for p in self.layout.free]
-        return np.concatenate(parts) if parts else np.zeros(0, bool)
 
     def _zero_cost(self, prep) -> float:
         return float(_zero_cost(self.metric, self.robust, prep, jnp.asarray(self.scale)))
