@@ -193,7 +193,8 @@ class Roles:
     near-mirror truth is isotropic with ``alpha = 1.1e-3``. At ``alpha = 1e-3`` with
     anisotropic 0.53 the narrow axis sat on the clamp and the specular lobe fixed only
     ``roughness^2 / aspect``; roughness was left to the diffuse retro-reflection term,
-    and every fit (0 of 20 on both metrics) crawled along that curved valley.
+    no start (of 20, either metric) recovered, and the traced low_e2 fit crawled along
+    that curved valley.
     """
 
     truth: dict
