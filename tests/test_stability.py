@@ -170,7 +170,7 @@ def test_disney_near_mirror_truth_keeps_both_axes_above_the_clamp():
     strict=True,
     reason="known limit: next to a near-mirror lobe an albedo's column of J is ~1e-5 of "
     "the lobe's and LM's uniform damping moves it ~0.02 in u per chunk; re-solving the "
-    "linear parameters between chunks (branch exp/projection) fixed this case but cut "
+    "linear parameters between chunks (commit 52eeec6, backed out) fixed this case but cut "
     "Lafortune's near-mirror recovery under ngan from 80% to 0-40%",
 )
 def test_an_albedo_next_to_a_near_mirror_lobe_is_solved_not_crawled():
