@@ -111,8 +111,8 @@ def _cost_gradient(model, free, metric, robust, u, prep, frozen, scale):
 
 
 @eqx.filter_jit
-def _scales(model, free, metric, robust, u, prep, frozen, scale, active):
-    """Residual and column scales for LM at ``u``: ``(rscale, cscale)``.
+def _scales(model, free, metric, robust, u, prep, frozen, scale, active, bounded):
+    """Residual and column scales for LM at ``u``: ``(rscale, cscale, csens)``.
 
     ``cscale_j = |J_j| / max_k |J_k|`` over the active columns (floored at ``_COL_FLOOR``;
     1 for inactive or degenerate ones). optimistix's LM damps every direction alike
@@ -120,6 +120,15 @@ def _scales(model, free, metric, robust, u, prep, frozen, scale, active):
     albedo deep in its logit tail, then moves ~1e-10 of its Gauss-Newton step per
     step and the fit crawls for hundreds of steps. Scaling the columns gives
     Marquardt's (and MINPACK's) ``lambda diag(J^T J)`` damping instead.
+
+    ``csens`` is the same scale with a saturating transform's flattening divided out:
+    ``|J_j| / (4 s (1 - s))``, ``s = sigmoid(u_j)`` (``bounded`` marks those scalars; the
+    factor is 1 at the transform's centre), capped at the largest column. It measures
+    how much the data see the parameter itself, not where it sits on its transform. An
+    albedo next to a near-mirror lobe under the linear ngan metric (a column 1e-5 of the
+    lobe's, at the centre of its logit) gets Marquardt's damping; a scalar whose column
+    is small only because it is deep in a tail keeps the uniform damping, so it cannot
+    leap across the tail onto the wrong bound.
 
     ``rscale = 1 / sqrt(TAU max_j (J^T J)_jj)`` (1 if degenerate): optimistix's LM
     starts with ``lambda = 1`` whatever the size of ``J^T J``; on a metric whose residuals
@@ -139,7 +148,13 @@ def _scales(model, free, metric, robust, u, prep, frozen, scale, active):
     col = jnp.where(
         active & ok & jnp.isfinite(norms), jnp.maximum(norms / safe_top, _COL_FLOOR), 1.0
     )
-    return jnp.where(ok, 1.0 / (jnp.sqrt(_TAU) * safe_top), 1.0), col
+    s = jax.nn.sigmoid(u)
+    flat = jnp.where(bounded, jnp.maximum(4.0 * s * (1.0 - s), 1e-30), 1.0)
+    sens = jnp.minimum(norms / flat, safe_top)
+    csens = jnp.where(
+        active & ok & jnp.isfinite(sens), jnp.maximum(sens / safe_top, _COL_FLOOR), 1.0
+    )
+    return jnp.where(ok, 1.0 / (jnp.sqrt(_TAU) * safe_top), 1.0), col, csens
 
 
 @eqx.filter_jit
@@ -162,7 +177,7 @@ def _plain_residuals(model, free, metric, u, prep, frozen):
 
 
 _TAU = 1e-3  # initial LM damping relative to the largest diagonal entry of J^T J
-_LOCAL = 1e-3  # relative loss decrease per chunk below which the columns are scaled
+_LOCAL = 1e-3  # relative loss decrease per chunk below which the columns get the full scale
 _COL_FLOOR = 1e-8  # smallest column scale: a column 1e-8 of the largest is left that small
 _EXACT = 1e-16  # cost / the zero BRDF's cost at which the data count as reproduced exactly
 _STALL = 1e-9  # relative loss decrease over a chunk below which a descent has converged
@@ -199,10 +214,10 @@ class _Problem:
             jnp.broadcast_to(jnp.asarray(cscale, jnp.float64), jnp.shape(u0)), max_steps,
         )  # fmt: skip
 
-    def scales(self, u, prep, active: np.ndarray) -> tuple[jax.Array, jax.Array]:
+    def scales(self, u, prep, active: np.ndarray) -> tuple[jax.Array, jax.Array, jax.Array]:
         return _scales(
             self.model, self.layout.free, self.metric, self.robust, u, prep, self.frozen,
-            jnp.asarray(self.scale), jnp.asarray(active),
+            jnp.asarray(self.scale), jnp.asarray(active), jnp.asarray(_bounded(self.layout)),
         )  # fmt: skip
 
     def descend(
@@ -248,13 +263,16 @@ class _Problem:
         where ``J`` is near-singular at such a fit LM goes on shrinking the cost by a
         constant factor per step without ever meeting its step tolerance.
 
-        The columns of ``J`` are scaled (:func:`_scales`) once a chunk lowers the loss by
+        The columns of ``J`` are scaled from the first chunk by the parameters'
+        sensitivities (``csens`` of :func:`_scales`), which leave a scalar in its
+        transform's tail at the uniform damping. They get Marquardt's full column scale
+        (``cscale``), which lets such a scalar move too, once a chunk lowers the loss by
         less than ``_LOCAL`` (relative): near the minimum, where LM's quadratic model
-        holds, uniform damping would make weakly-sensitive parameters crawl; far from
-        it, scaling would let those same parameters leap across their transforms'
-        tails and be pinned on the wrong bound. They are scaled as well once a free
-        bounded scalar moved outward deep in its tail (``|u| > 4``) and pinning it did
-        not lower the cost: uniform damping then moves it ~0.01 in ``u`` per chunk.
+        holds, uniform damping would make it crawl; far from it, the full scale would
+        let it leap across the tail and be pinned on the wrong bound. They get the full
+        scale as well once a free bounded scalar moved outward deep in its tail
+        (``|u| > 4``) and pinning it did not lower the cost: uniform damping then moves
+        it ~0.01 in ``u`` per chunk.
         """
         bounded = _bounded(self.layout)
         previous, damp, scaled = math.inf, 1.0, False
@@ -262,9 +280,10 @@ class _Problem:
         exact = _EXACT * self._zero_cost(prep)
         while True:
             before = np.abs(np.asarray(u))
-            rscale, cscale = self.scales(u, prep, active)
-            cscale = cscale if scaled else 1.0
-            u, res, k, loss = self.solve(u, prep, active, chunk, rscale * damp, cscale)
+            rscale, cscale, csens = self.scales(u, prep, active)
+            cscale = cscale if scaled else csens
+            n = min(chunk, max_steps - steps)  # never past max_steps
+            u, res, k, loss = self.solve(u, prep, active, n, rscale * damp, cscale)
             steps, loss = steps + int(k), float(loss)
             if res != optx.RESULTS.nonlinear_max_steps_reached:
                 break
@@ -599,6 +618,10 @@ def fit(
         raise ParameterError(f"robust_scale={robust_scale!r}: must be a positive number")
     if screen < 0 or n_restarts < 0:
         raise ParameterError(f"screen={screen!r}, n_restarts={n_restarts!r}: must be >= 0")
+    if isinstance(max_steps, bool) or not (
+        isinstance(max_steps, int | np.integer) and max_steps >= 1
+    ):
+        raise ParameterError(f"max_steps={max_steps!r}: must be an integer >= 1")
     if coarse is not None and coarse < 100:
         raise ParameterError(f"coarse={coarse!r}: use None or at least 100 samples")
     start = _start_params(model, init)
