@@ -68,6 +68,21 @@ def test_a_fit_that_runs_out_of_steps_is_not_converged(walter):
     assert isinstance(err.value.result, FitResult)
 
 
+@pytest.mark.parametrize("max_steps", [1, 2, 3])
+def test_a_fit_never_takes_more_lm_steps_than_max_steps(walter, max_steps):
+    # LM runs in chunks of 8 steps; a chunk used to run whole, so max_steps=1 reported 8.
+    data = synthesize(walter, TRUTH, stride=GRID)
+    r = fit(walter, data, "low_e2", max_steps=max_steps, n_restarts=0, screen=0, throw=False)
+    assert r.n_steps <= max_steps and r.status is Status.MAX_STEPS, (r.n_steps, r.status)
+
+
+@pytest.mark.parametrize("bad", [0, -3, True])
+def test_max_steps_must_be_a_positive_integer(walter, bad):
+    data = synthesize(walter, TRUTH, stride=GRID)
+    with pytest.raises(ParameterError, match="max_steps"):
+        fit(walter, data, max_steps=bad)
+
+
 def test_a_non_finite_fit_is_reported_failed(walter):
     good = synthesize(walter, TRUTH, stride=GRID)
     huge = good.values * 1e305  # (f_model - f_data)^2 overflows: the loss is inf
