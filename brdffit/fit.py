@@ -221,7 +221,13 @@ class _Problem:
         )  # fmt: skip
 
     def descend(
-        self, u0, prep, active: np.ndarray, max_steps: int, chunk: int = _CHUNK
+        self,
+        u0,
+        prep,
+        active: np.ndarray,
+        max_steps: int,
+        chunk: int = _CHUNK,
+        sensitive: bool = True,
     ) -> _Descent:
         """LM in chunks of ``_CHUNK`` steps; a scalar whose transform saturates is pinned.
 
@@ -232,21 +238,31 @@ class _Problem:
         moved back inside (probed at ``|u| = 12``, 6e-6 of the span from the bound) is
         released and the descent resumes, as long as that lowers the loss: a pin must be
         a Karush-Kuhn-Tucker point, not an accident of the path.
+
+        ``sensitive=False`` keeps the uniform damping until the full column scale
+        switches on (see :meth:`_chunks`).
         """
-        d = self._chunks(u0, prep, active.copy(), max_steps, 0, chunk)
+        d = self._chunks(u0, prep, active.copy(), max_steps, 0, chunk, sensitive)
         while d.steps < max_steps:
             released = self._released(d.u, prep, d.active)
             if not released.any():
                 break
             u = jnp.where(jnp.asarray(released), jnp.sign(d.u) * _RESUME_U, d.u)
-            d2 = self._chunks(u, prep, d.active | released, max_steps, d.steps, chunk)
+            d2 = self._chunks(u, prep, d.active | released, max_steps, d.steps, chunk, sensitive)
             if not d2.loss < d.loss * (1 - 1e-12):
                 break  # the released scalars went back to their bound: keep the pins
             d = d2
         return d
 
     def _chunks(
-        self, u, prep, active: np.ndarray, max_steps: int, steps: int, chunk: int
+        self,
+        u,
+        prep,
+        active: np.ndarray,
+        max_steps: int,
+        steps: int,
+        chunk: int,
+        sensitive: bool = True,
     ) -> _Descent:
         """Chunks of LM until it converges, stagnates or runs out of steps.
 
@@ -272,7 +288,8 @@ class _Problem:
         let it leap across the tail and be pinned on the wrong bound. They get the full
         scale as well once a free bounded scalar moved outward deep in its tail
         (``|u| > 4``) and pinning it did not lower the cost: uniform damping then moves
-        it ~0.01 in ``u`` per chunk.
+        it ~0.01 in ``u`` per chunk. With ``sensitive=False`` the columns stay unscaled
+        until then (the uniform damping).
         """
         bounded = _bounded(self.layout)
         previous, damp, scaled = math.inf, 1.0, False
@@ -281,7 +298,7 @@ class _Problem:
         while True:
             before = np.abs(np.asarray(u))
             rscale, cscale, csens = self.scales(u, prep, active)
-            cscale = cscale if scaled else csens
+            cscale = cscale if scaled else csens if sensitive else 1.0
             n = min(chunk, max_steps - steps)  # never past max_steps
             u, res, k, loss = self.solve(u, prep, active, n, rscale * damp, cscale)
             steps, loss = steps + int(k), float(loss)
@@ -504,6 +521,13 @@ def _screened_start(
     descends to the Fresnel-saturated corner (eta = 100, kd = 0: loss 268 against 80),
     the second cheapest to the optimum. So the ``_RACE`` cheapest candidates each get
     one chunk of LM steps, and the one with the lowest loss after it is returned.
+
+    The race's chunk uses the uniform damping. With the sensitivity damping of the
+    fit itself, a candidate's chunk can carry a scalar the data barely see across its
+    whole transform (Low's ``eta`` from 30 to the bound at 100, where the normalised
+    Fresnel is nearly flat in angle), which lowers that chunk's loss but ends in the
+    corner; uniform damping keeps each candidate near its start, so the race compares
+    the basins the candidates start in.
     """
     layout = problem.layout
     scored = []
@@ -518,7 +542,7 @@ def _screened_start(
     best, best_loss = None, math.inf
     everywhere = np.ones(layout.size, bool)
     for _, c in scored[:_RACE]:
-        d = problem.descend(layout.unconstrained(c), prep, everywhere, _CHUNK)
+        d = problem.descend(layout.unconstrained(c), prep, everywhere, _CHUNK, sensitive=False)
         loss = d.loss if math.isfinite(d.loss) else math.inf
         if best is None or loss < best_loss:
             best, best_loss = c, loss

@@ -86,10 +86,14 @@ class Parameter:
         if self.transform == "identity":
             return u
         if self.transform == "logit":
-            return lo + (hi - lo) * jax.nn.sigmoid(u)
-        if math.isfinite(hi):
-            return lo * jnp.exp(math.log(hi / lo) * jax.nn.sigmoid(u))
-        return lo + jnp.exp(u)
+            x = lo + (hi - lo) * jax.nn.sigmoid(u)
+        elif math.isfinite(hi):
+            x = lo * jnp.exp(math.log(hi / lo) * jax.nn.sigmoid(u))
+        else:
+            return lo + jnp.exp(u)
+        # rounding can land 1-4 ulp past a bound (100 * (1 + 2e-16)); keep the value a
+        # user could pass back in (``where``, not ``clip``: the gradient stays whole)
+        return jnp.where(x > hi, hi, jnp.where(x < lo, lo, x))
 
     def to_unconstrained(self, x: jax.Array) -> jax.Array:
         """Natural ``x`` -> unconstrained ``u``; ``x`` is first nudged inside the bounds."""
