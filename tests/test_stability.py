@@ -166,17 +166,23 @@ def test_disney_near_mirror_truth_keeps_both_axes_above_the_clamp():
     assert float(base.truth["anisotropic"]) > 0.3  # the other regimes keep the anisotropy
 
 
+def _suite_start(model_name: str, regime_name: str, k: int):
+    """The stress suite's case data and its ``k``-th random start."""
+    regime = stress.REGIMES[regime_name]
+    spec = stress.case_spec(model_name, regime)
+    model = spec.build()
+    data, _ = stress.make_data(spec, regime, stress.N_SAMPLES)
+    init = stress.random_start(model, spec.freeze, np.random.default_rng([spec.seed, 2, k]))
+    return spec, regime, model, data, init
+
+
 def test_an_albedo_next_to_a_near_mirror_lobe_is_solved_not_crawled():
     # Cook-Torrance at m = 1e-3 under the Ngan metric, from the suite's first random
     # start. kd's column of J is ~1e-5 of the lobe's: under LM's uniform damping the fit
     # ended MAX_STEPS after 512 steps with kd[r] at 0.134 (truth 0.101) and every other
     # parameter right to 6 digits (fitter 5375dd5). Damping by each parameter's
     # sensitivity (fb27939) solves it.
-    regime = stress.REGIMES["near_mirror"]
-    spec = stress.case_spec("cook_torrance", regime)
-    model = spec.build()
-    data, _ = stress.make_data(spec, regime, stress.N_SAMPLES)
-    init = stress.random_start(model, spec.freeze, np.random.default_rng([spec.seed, 2, 0]))
+    spec, _, model, data, init = _suite_start("cook_torrance", "near_mirror", 0)
     r = fit(model, data, "ngan", init=init, n_restarts=0, seed=1, throw=False)
     assert r.converged and r.n_steps <= 128, (r.status, r.n_steps)
     np.testing.assert_allclose(r.params["kd"], spec.truth["kd"], rtol=1e-4)
@@ -185,14 +191,11 @@ def test_an_albedo_next_to_a_near_mirror_lobe_is_solved_not_crawled():
 def test_low_eta_is_not_carried_to_its_bound_by_the_screening_race():
     # Low's model, truths on their bounds, under the Ngan metric, from the suite's 13th
     # random start (eta 12.8). With the race under the sensitivity damping alone
-    # (fb27939), the winning candidate's one chunk took eta from 30 to its bound at 100;
-    # the fit ended there with kd[b] 0.96 and ks[r] 1 (truths 1 and 0.56) at 2.9e9
-    # times the optimum's loss. The uniform-damping race's winner is a start too now.
-    regime = stress.REGIMES["at_bounds"]
-    spec = stress.case_spec("low", regime)
-    model = spec.build()
-    data, _ = stress.make_data(spec, regime, stress.N_SAMPLES)
-    init = stress.random_start(model, spec.freeze, np.random.default_rng([spec.seed, 2, 12]))
+    # (fb27939), the fit ended with eta on its bound at 100, kd[b] 0.96 and ks[r] 1
+    # (truths 1 and 0.56), at 2.9e9 times the optimum's loss: the race's one chunk can
+    # carry eta to 100 and win on that chunk's loss. The uniform-damping race's winner
+    # is a start too now.
+    spec, regime, model, data, init = _suite_start("low", "at_bounds", 12)
     r = fit(
         model, data, "ngan", init=init, freeze=spec.freeze or None, cut_deg=regime.cut_deg,
         n_restarts=0, seed=13, throw=False,
