@@ -511,7 +511,7 @@ def _spread_start(layout: ParameterLayout, base: Params, rng: np.random.Generato
 def _screened_starts(
     problem: _Problem, base: Params, prep, rng: np.random.Generator, n: int
 ) -> list[Params]:
-    """The best of ``n`` spread candidates (linear parameters solved for each).
+    """The best one or two of ``n`` spread candidates (linear parameters solved for each).
 
     A local descent started with the lobe far too wide or too narrow can end in a
     corner minimum (walter from a random start: ``J = 1536`` against ``4e-29``); the
@@ -624,8 +624,10 @@ def fit(
       parameters leave the fit and get zero standard error.
     - ``cut_deg``: zenith-angle cut for both directions, degrees (``None``: none).
     - ``n_restarts``: seeded random starts (near the first one) in addition to it.
-    - ``screen``: spread candidates whose best (linear parameters solved, lowest
-      cost on the coarse samples) is one more start; 0 turns the screen off.
+    - ``screen``: spread candidates, linear parameters solved for each; the cheapest
+      on the coarse samples race for one chunk of LM steps under two dampings, and
+      each race's winner is one more start (see ``_screened_starts``); 0 turns the
+      screen off.
     - ``max_steps``, ``rtol``, ``atol``: LM limits (per descent) and tolerances.
     - ``errors``: ``"sandwich"`` or ``"classic"`` (module docstring).
     - ``robust``: ``None``, ``"huber"`` or ``"cauchy"``: a robust loss on the metric's

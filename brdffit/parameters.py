@@ -91,8 +91,8 @@ class Parameter:
             x = lo * jnp.exp(math.log(hi / lo) * jax.nn.sigmoid(u))
         else:
             return lo + jnp.exp(u)
-        # rounding can land 1-4 ulp past a bound (100 * (1 + 2e-16)); keep the value a
-        # user could pass back in (``where``, not ``clip``: the gradient stays whole)
+        # rounding can land a few ulp past a bound (10.000000000000009 on [0.001, 10]);
+        # keep a value a user could pass back in (``where``: the gradient stays whole)
         return jnp.where(x > hi, hi, jnp.where(x < lo, lo, x))
 
     def to_unconstrained(self, x: jax.Array) -> jax.Array:
