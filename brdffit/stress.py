@@ -644,6 +644,11 @@ def random_start(model, freeze: dict, rng: np.random.Generator) -> dict:
     return out
 
 
+def case_start(model, spec: CaseSpec, index: int) -> dict:
+    """The case's ``index``-th random start (seeded by the case and the index)."""
+    return random_start(model, spec.freeze, np.random.default_rng([spec.seed, 2, index]))
+
+
 @eqx.filter_jit
 def _objective(model, metric, robust, params, prep, scale):
     return metrics.objective(metric, model.evaluate(params, prep.g), prep, robust, scale)
@@ -800,10 +805,9 @@ def run_case(
     ref, ref_result = _one_fit(model, data, metric, regime, spec, free_truth, None, max_steps)
     scale = ref_result.robust_scale if ref_result is not None else None
     robust_scale = 1.0 if scale is None else float(scale)
-    rng_starts = [np.random.default_rng([spec.seed, 2, i]) for i in range(n_starts)]
     starts = []
-    for i, rng in enumerate(rng_starts):
-        init = random_start(model, spec.freeze, rng)
+    for i in range(n_starts):
+        init = case_start(model, spec, i)
         rec, _ = _one_fit(model, data, metric, regime, spec, init, scale, max_steps, seed=i + 1)
         rec["seed"] = i
         rec["init"] = {k: np.asarray(v).tolist() for k, v in init.items()}

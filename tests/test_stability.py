@@ -172,8 +172,7 @@ def _suite_start(model_name: str, regime_name: str, k: int):
     spec = stress.case_spec(model_name, regime)
     model = spec.build()
     data, _ = stress.make_data(spec, regime, stress.N_SAMPLES)
-    init = stress.random_start(model, spec.freeze, np.random.default_rng([spec.seed, 2, k]))
-    return spec, regime, model, data, init
+    return spec, regime, model, data, stress.case_start(model, spec, k)
 
 
 def test_an_albedo_next_to_a_near_mirror_lobe_is_solved_not_crawled():
