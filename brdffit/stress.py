@@ -5,7 +5,7 @@ drawn from the model's baseline parameters (:data:`ROLES`, jittered with the cas
 seed) and changed as the regime says; the data are synthesised from it; then the model
 is fitted once from the truth (the *reference*) and from ``n_starts`` seeded random
 starts (``init=`` a random natural point, ``n_restarts=0``; the fit's own screen of
-spread candidates still adds its one start, as it does in use, seeded with the start's
+spread candidates still adds its starts, as it does in use, seeded with the start's
 number so that the screen too differs from start to start).
 
 **Recovery.** A start is recovered when its fit is finite, converged (``Status.CONVERGED``)
