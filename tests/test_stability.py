@@ -187,7 +187,7 @@ def test_an_albedo_next_to_a_near_mirror_lobe_is_solved_not_crawled():
     np.testing.assert_allclose(r.params["kd"], spec.truth["kd"], rtol=1e-4)
 
 
-@pytest.mark.slow  # ~40 s: Disney's near-mirror fit on 2000 samples
+@pytest.mark.slow  # Disney's near-mirror fit on 2000 samples: 36-174 s here
 def test_a_grown_trust_region_is_carried_from_chunk_to_chunk():
     # Disney at alpha = 1.1e-3 under the Ngan metric, from the suite's first random start.
     # With LM's damping restarted in every 8-step chunk (a82aece), each chunk ended
