@@ -175,6 +175,16 @@ def _suite_start(model_name: str, regime_name: str, k: int):
     return spec, regime, model, data, stress.case_start(model, spec, k)
 
 
+def _suite_fit(model_name: str, regime_name: str, k: int, metric: str = "ngan"):
+    """The case's truth and the fit the suite runs from its ``k``-th random start."""
+    spec, regime, model, data, init = _suite_start(model_name, regime_name, k)
+    r = fit(
+        model, data, metric, init=init, freeze=spec.freeze or None, cut_deg=regime.cut_deg,
+        n_restarts=0, seed=k + 1, throw=False,
+    )  # fmt: skip
+    return spec, r
+
+
 def test_an_albedo_next_to_a_near_mirror_lobe_is_solved_not_crawled():
     # Cook-Torrance at m = 1e-3 under the Ngan metric, from the suite's first random
     # start. kd's column of J is ~1e-5 of the lobe's: under LM's uniform damping the fit
@@ -194,11 +204,7 @@ def test_a_grown_trust_region_is_carried_from_chunk_to_chunk():
     # 6.4e3 times less damped than it began and moved ~2e-4 in u: the fit ended
     # MAX_STEPS after 512 steps at loss 5.2e-3, sheen pinned at 1 (truth 0.36). With the
     # grown trust region carried over it converges to the truth.
-    spec, regime, model, data, init = _suite_start("disney", "near_mirror", 0)
-    r = fit(
-        model, data, "ngan", init=init, freeze=spec.freeze or None, cut_deg=regime.cut_deg,
-        n_restarts=0, seed=1, throw=False,
-    )  # fmt: skip
+    spec, r = _suite_fit("disney", "near_mirror", 0)
     assert r.converged, (r.status, r.n_steps, r.loss)
     for name in ("roughness", "sheen", "clearcoat", "clearcoat_gloss"):
         np.testing.assert_allclose(r.params[name], spec.truth[name], rtol=1e-4, err_msg=name)
@@ -209,11 +215,7 @@ def test_a_linear_metric_gets_a_start_descended_under_a_compressive_one():
     # from the suite's first random start: at 1802e64 every start descended under ngan
     # alone and the fit ended in a corner: kd = rho_1 = 0 with cxy_1 at -1.3e21 (loss 138).
     # Descended under low_e2 first, the best start lands in the optimum's basin.
-    spec, regime, model, data, init = _suite_start("lafortune", "grazing_cut80", 0)
-    r = fit(
-        model, data, "ngan", init=init, freeze=spec.freeze or None, cut_deg=regime.cut_deg,
-        n_restarts=0, seed=1, throw=False,
-    )  # fmt: skip
+    spec, r = _suite_fit("lafortune", "grazing_cut80", 0)
     assert r.converged, (r.status, r.loss)
     for name in ("cxy_1", "n_1", "rho_1", "kd"):
         np.testing.assert_allclose(r.params[name], spec.truth[name], rtol=1e-4, err_msg=name)
@@ -226,11 +228,7 @@ def test_low_eta_is_not_carried_to_its_bound_by_the_screening_race():
     # (truths 1 and 0.56), at 2.9e9 times the optimum's loss: the race's one chunk can
     # carry eta to 100 and win on that chunk's loss. The uniform-damping race's winner
     # is a start too now.
-    spec, regime, model, data, init = _suite_start("low", "at_bounds", 12)
-    r = fit(
-        model, data, "ngan", init=init, freeze=spec.freeze or None, cut_deg=regime.cut_deg,
-        n_restarts=0, seed=13, throw=False,
-    )  # fmt: skip
+    spec, r = _suite_fit("low", "at_bounds", 12)
     assert float(r.params["eta"]) < 2.0, r.params
     np.testing.assert_allclose(r.params["eta"], spec.truth["eta"], rtol=1e-4)
     np.testing.assert_allclose(r.params["ks"], spec.truth["ks"], atol=1e-6)
