@@ -399,7 +399,8 @@ class _Problem:
 def _carry(damp: float, step: float) -> float:
     """The next chunk's residual scale factor from this chunk's ``damp`` and LM's final
     trust-region ``step``: a grown trust region is carried over (the damping continues
-    where LM left it), a shrunk one restarts at the undamped scale (see :meth:`_chunks`)."""
+    where LM left it); after a shrunk one, what was carried is dropped and the factor is
+    at most 1 again (see :meth:`_chunks`)."""
     return min(damp * math.sqrt(step), _DAMP_MAX) if step > 1 else min(damp, 1.0)
 
 
@@ -599,7 +600,8 @@ def _compressive_start(
     starts under ngan; in the one traced, every start, screened ones included, ended
     with the peak missed. Under ``low_e2``'s ``ln(1 + f cos)`` the peak is compressed
     and its basin is wide: the same case recovers 19 of 20 under low_e2. Descending the
-    ngan screen's winners under low_e2 recovered 16 of 20; low_e2's own screen, 20 of 20.
+    ngan starts (random and race winners) under low_e2 recovered 16 of 20 under ngan;
+    the random start with low_e2's own race winners, 20 of 20.
     The fit keeps whichever start descends lowest under its own metric, so this start
     only adds a candidate. Returns ``None`` if no descent was finite.
     """
