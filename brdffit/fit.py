@@ -879,6 +879,12 @@ def _assemble(
             f"parameters at a bound: {', '.join(at_bound)}; the best fit lies on the bound, "
             "their errors are unreliable (NaN where pinned)"
         )
+    outside = _outside_bounds(layout, params)
+    if outside:
+        warnings.append(
+            f"parameters outside their documented bounds: {'; '.join(outside)}; an identity "
+            "transform does not hold a fit inside (the value cannot be passed back as init)"
+        )
     named = f" ({', '.join(weak_names)})" if weak_names else ""
     if reason and status is not Status.NONFINITE:
         warnings.append(f"no uncertainties: {reason}; not identified{named or ' (none named)'}")
@@ -922,6 +928,20 @@ def _assemble(
         robust=problem.robust,
         robust_scale=robust_scale,
     )
+
+
+def _outside_bounds(layout: ParameterLayout, params: dict[str, np.ndarray]) -> tuple[str, ...]:
+    """``name = value [low, high]`` of the free parameters whose value left their bounds.
+
+    Only identity transforms can: Lafortune's lobe ratios walked to ``cxy = -1.3e21``
+    (documented [-10, 10]) on grazing-dominated data in the stress suite.
+    """
+    out = []
+    for p in layout.free:
+        x = np.asarray(params[p.name])
+        if np.any(x < p.bounds[0]) or np.any(x > p.bounds[1]):
+            out.append(f"{p.name} = {np.array2string(x, precision=4)} {list(p.bounds)}")
+    return tuple(out)
 
 
 def _at_bound(

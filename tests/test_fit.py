@@ -201,3 +201,18 @@ def test_an_albedo_deep_in_its_tail_is_fitted_not_pinned(walter):
     r = fit(walter, data, "low_e2", init=truth, n_restarts=0, screen=0)
     assert r.converged and "kd" not in r.at_bound, (r.status, r.at_bound)
     np.testing.assert_allclose(r.params["kd"], truth["kd"], rtol=1e-4)
+
+
+def test_a_parameter_outside_its_documented_bounds_is_named():
+    # Lafortune's lobe ratio has an identity transform: nothing holds a fit inside
+    # [-10, 10], and stress fits ended at cxy_1 = -1.3e21 (1802e64) or -3.4e3 (low_e2).
+    from brdffit.fit import _outside_bounds
+    from brdffit.parameters import ParameterLayout
+
+    model = models.get("lafortune")
+    layout = ParameterLayout.build(model.parameters)
+    params = {k: np.asarray(v) for k, v in model.defaults().items()}
+    assert _outside_bounds(layout, params) == ()
+    params["cxy_1"] = np.asarray(-3.4e3)
+    (named,) = _outside_bounds(layout, params)
+    assert named.startswith("cxy_1 = -3400") and "[-10.0, 10.0]" in named
