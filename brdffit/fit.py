@@ -590,9 +590,10 @@ def _compressive_start(
     rng: np.random.Generator,
     screen: int,
     max_steps: int,
-) -> Params | None:
+) -> tuple[Params | None, int]:
     """One more start for a linear metric: the best fit under ``low_e2`` from ``starts``
-    and ``low_e2``'s own screened starts (``starts[0]`` is the base of the screen).
+    and ``low_e2``'s own screened starts (``starts[0]`` is the base of the screen), and
+    the LM steps spent on it.
 
     Under a metric linear in the BRDF (ngan, low_e1) a narrow specular peak dominates the
     loss, and the loss is flat in the lobe's width until the lobe nearly covers the
@@ -603,19 +604,34 @@ def _compressive_start(
     ngan starts (random and race winners) under low_e2 recovered 16 of 20 under ngan;
     the random start with low_e2's own race winners, 20 of 20.
     The fit keeps whichever start descends lowest under its own metric, so this start
-    only adds a candidate. Returns ``None`` if no descent was finite.
+    only adds a candidate. The start is ``None`` if no descent was finite.
     """
     compressive = metrics_mod.get_metric(_COMPRESSIVE)
     p2 = dataclasses.replace(problem, metric=compressive)
     small = _subset(preps[compressive.name], coarse)
+    candidates = [*starts, *_screened_starts(p2, starts[0], small, rng, screen)]
+    best, _, steps = _best_descent(p2, candidates, small, max_steps)
+    if not math.isfinite(best.loss):
+        return None, steps
+    return _natural(problem.layout.free, best.u, problem.frozen), steps
+
+
+def _best_descent(
+    problem: _Problem, starts: Sequence[Params], prep, max_steps: int
+) -> tuple[_Descent, Params, int]:
+    """Descend from each of ``starts`` (linear parameters solved first) on ``prep``:
+    the lowest descent (a non-finite loss counts as infinite), its start, and the steps
+    of all the descents. ``starts`` must not be empty."""
     layout, everywhere = problem.layout, np.ones(problem.layout.size, bool)
-    best = None
-    for s in [*starts, *_screened_starts(p2, starts[0], small, rng, screen)]:
-        s = _with_linear_start(problem.model, compressive, layout, s, small)
-        d = p2.descend(layout.unconstrained(s), small, everywhere, max_steps)
-        if math.isfinite(d.loss) and (best is None or d.loss < best.loss):
-            best = d
-    return None if best is None else _natural(layout.free, best.u, problem.frozen)
+    best, best_start, best_key, steps = None, None, math.inf, 0
+    for s in starts:
+        s = _with_linear_start(problem.model, problem.metric, layout, s, prep)
+        d = problem.descend(layout.unconstrained(s), prep, everywhere, max_steps)
+        steps += d.steps
+        key = d.loss if math.isfinite(d.loss) else math.inf
+        if best is None or key < best_key:
+            best, best_start, best_key = d, s, key
+    return best, best_start, steps
 
 
 def _covariance(
@@ -738,20 +754,17 @@ def fit(
     small = _subset(prep, coarse)
     first = {**start, **frozen}
     starts = [first] + [_random_start(layout, first, rng) for _ in range(n_restarts)]
+    extra_steps = 0
     if screen and any(not p.linear for p in layout.free):
         plain = list(starts)
         starts += _screened_starts(problem, first, small, rng, screen)
         if not m.log1p:
-            extra = _compressive_start(problem, plain, preps, coarse, rng, screen, max_steps)
+            extra, extra_steps = _compressive_start(
+                problem, plain, preps, coarse, rng, screen, max_steps
+            )
             starts += [] if extra is None else [extra]
-    everywhere = np.ones(layout.size, bool)
-    best, best_start, coarse_steps = None, first, 0
-    for s in starts:
-        s = _with_linear_start(model, m, layout, s, small)
-        d = problem.descend(layout.unconstrained(s), small, everywhere, max_steps)
-        coarse_steps += d.steps
-        if best is None or (d.loss if math.isfinite(d.loss) else math.inf) < best.loss:
-            best, best_start = d, s
+    best, best_start, coarse_steps = _best_descent(problem, starts, small, max_steps)
+    coarse_steps += extra_steps
     # Stage 2: finish the winner on every sample (its pins carried over, re-checked).
     if small is not prep:
         best = problem.descend(best.u, prep, best.active, max_steps, chunk=_FINISH_CHUNK)

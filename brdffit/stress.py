@@ -670,6 +670,35 @@ def _finite_params(params: dict) -> bool:
     return all(np.all(np.isfinite(np.asarray(v, float))) for v in params.values())
 
 
+def case_fit(
+    model,
+    data,
+    metric: str,
+    regime: Regime,
+    spec: CaseSpec,
+    init: dict,
+    scale=None,
+    max_steps: int = MAX_STEPS,
+    seed: int = 0,
+):
+    """The fit the suite runs from ``init`` (``seed`` seeds its screen; ``scale`` the
+    robust scale, ``None`` to estimate it); returns the :class:`FitResult`."""
+    return fit(
+        model,
+        data,
+        metric,
+        init=init,
+        freeze=spec.freeze or None,
+        cut_deg=regime.cut_deg,
+        n_restarts=0,
+        seed=seed,
+        robust=regime.robust,
+        robust_scale=scale,
+        max_steps=max_steps,
+        throw=False,
+    )
+
+
 def _one_fit(
     model,
     data,
@@ -685,20 +714,7 @@ def _one_fit(
 
     t0 = time.perf_counter()
     try:
-        r = fit(
-            model,
-            data,
-            metric,
-            init=init,
-            freeze=spec.freeze or None,
-            cut_deg=regime.cut_deg,
-            n_restarts=0,
-            seed=seed,
-            robust=regime.robust,
-            robust_scale=scale,
-            max_steps=max_steps,
-            throw=False,
-        )
+        r = case_fit(model, data, metric, regime, spec, init, scale, max_steps, seed)
     except Exception as e:  # recorded as a failure, the suite goes on
         return {
             "status": "EXCEPTION",

@@ -13,7 +13,7 @@ import math
 import numpy as np
 import pytest
 
-from brdffit import fit, models, stress
+from brdffit import models, stress
 from brdffit.metrics import get_metric, prepare
 
 
@@ -166,23 +166,14 @@ def test_disney_near_mirror_truth_keeps_both_axes_above_the_clamp():
     assert float(base.truth["anisotropic"]) > 0.3  # the other regimes keep the anisotropy
 
 
-def _suite_start(model_name: str, regime_name: str, k: int):
-    """The stress suite's case data and its ``k``-th random start."""
+def _suite_fit(model_name: str, regime_name: str, k: int, metric: str = "ngan"):
+    """The case's spec and the fit the stress suite runs from its ``k``-th random start."""
     regime = stress.REGIMES[regime_name]
     spec = stress.case_spec(model_name, regime)
     model = spec.build()
     data, _ = stress.make_data(spec, regime, stress.N_SAMPLES)
-    return spec, regime, model, data, stress.case_start(model, spec, k)
-
-
-def _suite_fit(model_name: str, regime_name: str, k: int, metric: str = "ngan"):
-    """The case's truth and the fit the suite runs from its ``k``-th random start."""
-    spec, regime, model, data, init = _suite_start(model_name, regime_name, k)
-    r = fit(
-        model, data, metric, init=init, freeze=spec.freeze or None, cut_deg=regime.cut_deg,
-        n_restarts=0, seed=k + 1, throw=False,
-    )  # fmt: skip
-    return spec, r
+    init = stress.case_start(model, spec, k)
+    return spec, stress.case_fit(model, data, metric, regime, spec, init, seed=k + 1)
 
 
 def test_an_albedo_next_to_a_near_mirror_lobe_is_solved_not_crawled():
@@ -191,8 +182,7 @@ def test_an_albedo_next_to_a_near_mirror_lobe_is_solved_not_crawled():
     # ended MAX_STEPS after 512 steps with kd[r] at 0.134 (truth 0.101) and every other
     # parameter right to 6 digits (fitter 5375dd5). Damping by each parameter's
     # sensitivity (fb27939) solves it.
-    spec, _, model, data, init = _suite_start("cook_torrance", "near_mirror", 0)
-    r = fit(model, data, "ngan", init=init, n_restarts=0, seed=1, throw=False)
+    spec, r = _suite_fit("cook_torrance", "near_mirror", 0)
     assert r.converged and r.n_steps <= 128, (r.status, r.n_steps)
     np.testing.assert_allclose(r.params["kd"], spec.truth["kd"], rtol=1e-4)
 
