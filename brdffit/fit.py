@@ -193,7 +193,7 @@ _SATURATED_U = 12.0  # |u| beyond which a bounded transform is within 6e-6 of it
 _PROBE_U = _SATURATED_U  # |u| where a pinned scalar is probed for a gradient pointing inward
 _RESUME_U = 8.0  # |u| a released scalar resumes from
 _RACE = 8  # cheapest screened candidates raced for one chunk of LM steps
-_COMPRESSIVE = "low_e2"  # the metric a linear metric's extra start is descended under
+_OTHER_METRIC = {False: "low_e2", True: "ngan"}  # keyed on log1p: the extra start's metric
 _DAMP_UP = 1e-2  # residual scale factor (damping x 1e4) after a chunk that went nowhere
 _DAMP_MAX = 1e4  # largest residual scale factor carried between chunks (damping / 1e8)
 
@@ -582,7 +582,7 @@ def _screened_starts(
     return winners
 
 
-def _compressive_start(
+def _other_metric_start(
     problem: _Problem,
     starts: Sequence[Params],
     preps,
@@ -591,24 +591,27 @@ def _compressive_start(
     screen: int,
     max_steps: int,
 ) -> tuple[Params | None, int]:
-    """One more start for a linear metric: the best fit under ``low_e2`` from ``starts``
-    and ``low_e2``'s own screened starts (``starts[0]`` is the base of the screen), and
-    the LM steps spent on it.
+    """One more start: the best fit under the other kind of metric from ``starts`` and
+    that metric's own screened starts (``starts[0]`` is the base of the screen), and the
+    LM steps spent on it. A linear metric (ngan, low_e1) gets ``low_e2``; a log metric
+    (low_e2, log1p_l1) gets ``ngan``.
 
-    Under a metric linear in the BRDF (ngan, low_e1) a narrow specular peak dominates the
-    loss, and the loss is flat in the lobe's width until the lobe nearly covers the
-    peak. Disney's near-mirror stress case (alpha = 1.1e-3) failed 17 of 20 random
-    starts under ngan; in the one traced, every start, screened ones included, ended
-    with the peak missed. Under ``low_e2``'s ``ln(1 + f cos)`` the peak is compressed
-    and its basin is wide: the same case recovers 19 of 20 under low_e2. Descending the
-    ngan starts (random and race winners) under low_e2 recovered 16 of 20 under ngan;
-    the random start with low_e2's own race winners, 20 of 20.
-    The fit keeps whichever start descends lowest under its own metric, so this start
-    only adds a candidate. The start is ``None`` if no descent was finite.
+    Under a metric linear in the BRDF a narrow specular peak dominates the loss, and the
+    loss is flat in the lobe's width until the lobe nearly covers the peak. Disney's
+    near-mirror stress case (alpha = 1.1e-3) failed 17 of 20 random starts under ngan;
+    in the one traced, every start, screened ones included, ended with the peak missed.
+    Under ``low_e2``'s ``ln(1 + f cos)`` the peak is compressed and its basin is wide:
+    the same case recovers 20 of 20 under ngan with this start.
+    The other way round, a log metric all but ignores how high a 1e7 peak is, and its
+    race can pick candidates whose lobes sit in the floor: Disney and Lafortune at a
+    1e7 dynamic range recovered 17 and 18 of 20 under low_e2, and 20 of 20 with a start
+    descended under ngan. The fit keeps whichever start descends lowest under its own
+    metric, so this start only adds a candidate. The start is ``None`` if no descent
+    was finite.
     """
-    compressive = metrics_mod.get_metric(_COMPRESSIVE)
-    p2 = dataclasses.replace(problem, metric=compressive)
-    small = _subset(preps[compressive.name], coarse)
+    other = metrics_mod.get_metric(_OTHER_METRIC[problem.metric.log1p])
+    p2 = dataclasses.replace(problem, metric=other)
+    small = _subset(preps[other.name], coarse)
     candidates = [*starts, *_screened_starts(p2, starts[0], small, rng, screen)]
     best, _, steps = _best_descent(p2, candidates, small, max_steps)
     if not math.isfinite(best.loss):
@@ -703,10 +706,11 @@ def fit(
     - ``n_restarts``: seeded random starts (near the first one) in addition to it.
     - ``screen``: spread candidates, linear parameters solved for each; the cheapest
       on the coarse samples race for one chunk of LM steps under two dampings, and
-      each race's winner is one more start (see ``_screened_starts``). Under a linear
-      metric (``ngan``, ``low_e1``) the starts and ``low_e2``'s own screened starts are
-      also descended under ``low_e2``, and the best of those is one more start
-      (``_compressive_start``). 0 turns both off.
+      each race's winner is one more start (see ``_screened_starts``). The starts and
+      the other kind of metric's own screened starts are also descended under that
+      metric (``low_e2`` for a linear metric, ``ngan`` for a log one), and the best of
+      those is one more start (``_other_metric_start``); this roughly doubles the time
+      of a fit. 0 turns both off.
     - ``max_steps``, ``rtol``, ``atol``: LM limits (per descent) and tolerances.
     - ``errors``: ``"sandwich"`` or ``"classic"`` (module docstring).
     - ``robust``: ``None``, ``"huber"`` or ``"cauchy"``: a robust loss on the metric's
@@ -758,11 +762,10 @@ def fit(
     if screen and any(not p.linear for p in layout.free):
         plain = list(starts)
         starts += _screened_starts(problem, first, small, rng, screen)
-        if not m.log1p:
-            extra, extra_steps = _compressive_start(
-                problem, plain, preps, coarse, rng, screen, max_steps
-            )
-            starts += [] if extra is None else [extra]
+        extra, extra_steps = _other_metric_start(
+            problem, plain, preps, coarse, rng, screen, max_steps
+        )
+        starts += [] if extra is None else [extra]
     best, best_start, coarse_steps = _best_descent(problem, starts, small, max_steps)
     coarse_steps += extra_steps
     # Stage 2: finish the winner on every sample (its pins carried over, re-checked).

@@ -44,7 +44,7 @@ class FitResult:
     ``not_identified`` (labels of the free scalars on near-null directions of
     ``J^T J``), ``coarse_samples`` / ``coarse_steps`` (the starts' thinned stage: its
     sample count, 0 when the starts ran on all samples, and its steps summed over
-    starts, the descents under low_e2 for a linear metric's extra start included;
+    starts, the descents under the other metric for the extra start included;
     ``n_steps`` counts the winner's steps on all samples), ``robust`` /
     ``robust_scale`` (the robust loss and its scale in residual units, or None).
     """
