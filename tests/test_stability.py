@@ -143,6 +143,39 @@ def test_table_renders_from_json(tmp_path):
     assert "walter/low_e2/baseline" in line
 
 
+def _scored(regime: str, ref_alpha: float) -> dict:
+    """A Walter case scored from hand-made fits: the reference converged at alpha
+    ``ref_alpha`` to an objective 1e-3 above the one start's (alpha 0.15)."""
+    point = {"kd": [0.1, 0.2, 0.3], "f0": [0.9, 0.6, 0.3]}
+
+    def rec(alpha: float, j: float) -> dict:
+        return {"status": "CONVERGED", "finite": True, "objective": j,
+                "params": {**point, "alpha": alpha}, "n_steps": 10, "wall_time": 0.1}  # fmt: skip
+
+    case = {"model": "walter", "metric": "ngan", "regime": regime, "applicable": True,
+            "zero_objective": 10.0,
+            "reference": rec(ref_alpha, 1.001), "starts": [rec(0.15, 1.0)]}  # fmt: skip
+    return stress.score(case)
+
+
+def test_corrupted_data_whose_optimum_left_the_truths_basin_are_not_identifiable():
+    moved = _scored("outliers", 0.6)
+    assert moved["reference"]["reason"] == "wrong minimum"
+    assert not moved["identifiable"]
+    assert "outliers move the lowest minimum" in moved["not_identifiable_reason"]
+    assert "1.0e-03" in moved["not_identifiable_reason"]
+    # On noise-free data the truth is an exact minimum: a reference that misses it is
+    # the fitter's failure, and the case stays under the target.
+    clean = _scored("baseline", 0.6)
+    assert clean["identifiable"] and clean["not_identifiable_reason"] is None
+    # A reference that stalls next to the best point is in the truth's basin.
+    stalled = _scored("outliers", 0.1501)
+    assert stalled["reference"]["reason"] == "stalled next to the minimum"
+    assert stalled["identifiable"]
+    line = stress.summary([moved, clean])
+    assert "1 identifiable (1 not: walter/ngan/outliers)" in line
+
+
 def test_a_narrow_lafortune_lobe_stays_bounded_and_dynamic_range_freezes_the_ridge():
     spec = stress.case_spec("lafortune", stress.REGIMES["near_mirror"])
     assert spec.truth["n_1"] > 1e3 and float(spec.truth["cxy_1"]) == -1.0
