@@ -24,10 +24,12 @@ so: a bug), or the exception raised. A failure's *excess* is
 
 **Identifiable.** The recovery target applies to cases identifiable in principle. A case
 is not when :data:`NOT_IDENTIFIABLE` says so, or when its data are corrupted (noise,
-outliers) and the reference, started at the truth, converges to a distinct minimum above
-the best: the corruption then decides which of several minima is lowest, and none of
-them is the material's (:func:`_optimum_moved`). On noise-free data the truth is an exact
-minimum, so a failed reference there stays a failure.
+outliers) and the minimum of the truth's basin is not the lowest: such a case also gets
+a ``local`` fit, a plain descent from the truth (``screen=0``), and when that converges
+to a distinct minimum above the best, the corruption decides which of several minima is
+lowest, and none of them is the material's (:func:`_optimum_moved`). The reference is
+no test of that: its screen's starts can leave the basin. On noise-free data the truth
+is an exact minimum, so a failed reference there stays a failure.
 
 **Data.** Every regime gives exactly ``n_samples`` fitted samples (valid and inside the
 cut), so one compiled fit serves every regime of a model and metric. Directions are
@@ -688,9 +690,11 @@ def case_fit(
     scale=None,
     max_steps: int = MAX_STEPS,
     seed: int = 0,
+    screen: int | None = None,
 ):
     """The fit the suite runs from ``init`` (``seed`` seeds its screen; ``scale`` the
-    robust scale, ``None`` to estimate it); returns the :class:`FitResult`."""
+    robust scale, ``None`` to estimate it; ``screen=0`` a plain descent from ``init``,
+    ``None`` the fit's default screen); returns the :class:`FitResult`."""
     return fit(
         model,
         data,
@@ -699,6 +703,7 @@ def case_fit(
         freeze=spec.freeze or None,
         cut_deg=regime.cut_deg,
         n_restarts=0,
+        **({} if screen is None else {"screen": screen}),
         seed=seed,
         robust=regime.robust,
         robust_scale=scale,
@@ -717,12 +722,14 @@ def _one_fit(
     scale,
     max_steps: int,
     seed: int = 0,
+    screen: int | None = None,
 ):
-    """Run one fit (``seed`` seeds its screen); returns (record dict, FitResult or None)."""
+    """Run one fit (``seed`` seeds its screen, ``screen`` as in :func:`case_fit`);
+    returns (record dict, FitResult or None)."""
 
     t0 = time.perf_counter()
     try:
-        r = case_fit(model, data, metric, regime, spec, init, scale, max_steps, seed)
+        r = case_fit(model, data, metric, regime, spec, init, scale, max_steps, seed, screen)
     except Exception as e:  # recorded as a failure, the suite goes on
         return {
             "status": "EXCEPTION",
@@ -834,14 +841,19 @@ def run_case(
         rec["seed"] = i
         rec["init"] = {k: np.asarray(v).tolist() for k, v in init.items()}
         starts.append(rec)
-    for rec in [ref, *starts]:
+    extra = {}
+    if corrupts(regime):  # the truth's basin: a plain descent from the truth, no screen
+        extra["local"], _ = _one_fit(
+            model, data, metric, regime, spec, free_truth, scale, max_steps, screen=0
+        )
+    for rec in [ref, *starts, *extra.values()]:
         rec["objective"] = (
             objective(model, metric, regime.robust, robust_scale, rec["params"], prep)
             if rec.get("params") is not None and rec["finite"]
             else None
         )
     j0 = zero_objective(metric, regime.robust, robust_scale, prep)
-    out.update(robust_scale=scale, zero_objective=j0, reference=ref, starts=starts)
+    out.update(robust_scale=scale, zero_objective=j0, reference=ref, starts=starts, **extra)
     score(out, model)
     out["case_time"] = time.perf_counter() - t_case
     return out
@@ -857,8 +869,9 @@ def score(case: dict, model=None) -> dict:
     if model is None:
         model = registry.get(case["model"], **case.get("options", {}))
     ref, starts, j0 = case["reference"], case["starts"], case["zero_objective"]
+    local = case.get("local")
     freeze = set(case.get("frozen", ()))
-    fits = [ref, *starts]
+    fits = [ref, *starts, *([local] if local else [])]
     finite = [r for r in fits if r.get("objective") is not None and math.isfinite(r["objective"])]
     best_rec = min(finite, key=lambda r: r["objective"]) if finite else None
     best = best_rec["objective"] if best_rec else float("nan")
@@ -877,12 +890,12 @@ def score(case: dict, model=None) -> dict:
             if rec["u_distance"] < STALL_DISTANCE:
                 why = "stalled next to the minimum"
         rec["recovered"], rec["reason"] = ok, why
-        if rec is not ref and why is not None:
+        if rec is not ref and rec is not local and why is not None:
             failures[why] = failures.get(why, 0) + 1
             if rec.get("excess") is not None:
                 excess.setdefault(why, []).append(rec["excess"])
     declared = NOT_IDENTIFIABLE.get((case["model"], case["regime"]))
-    reason = declared or _optimum_moved(REGIMES.get(case["regime"]), ref)
+    reason = declared or _optimum_moved(REGIMES.get(case["regime"]), local or ref)
     case.update(identifiable=reason is None, not_identifiable_reason=reason)
     n_ok = sum(r["recovered"] for r in starts)
     steps = [r["n_steps"] for r in starts if r.get("n_steps") is not None]
@@ -902,24 +915,33 @@ def score(case: dict, model=None) -> dict:
     return case
 
 
+def corrupts(regime: Regime) -> bool:
+    """True when the regime corrupts the data (noise, outliers): the truth is then no
+    longer an exact minimum, and the suite also descends plainly from it."""
+    return bool(regime.noise_mult or regime.outliers)
+
+
 def _optimum_moved(regime: Regime | None, ref: dict) -> str | None:
     """Why a case is not identifiable from its data, or None: in a regime that corrupts
-    the data (noise, outliers), the fit from the truth converged to a distinct minimum
-    (a wrong minimum, not a stall) that some start beat.
+    the data (noise, outliers), the descent from the truth converged to a distinct
+    minimum (a wrong minimum, not a stall) that some start beat.
 
-    Then the lowest minimum is not the truth's: the corruption decides which of several
-    minima is lowest, and reaching it is a search among minima that say nothing about
-    the material. On noise-free data the truth is an exact minimum, so there a failed
-    reference stays the fitter's failure.
+    ``ref`` is the case's ``local`` fit, a plain descent from the truth with no screen:
+    its end is the minimum of the truth's basin. (Cases stored before that fit existed
+    pass their reference, whose own screen can leave the basin.) When a start beats it
+    elsewhere, the lowest minimum is not the truth's: the corruption decides which of
+    several minima is lowest, and reaching it is a search among minima that say nothing
+    about the material. On noise-free data the truth is an exact minimum, so there a
+    failed reference stays the fitter's failure.
     """
-    if regime is None or not (regime.noise_mult or regime.outliers):
+    if regime is None or not corrupts(regime):
         return None
     if ref.get("status") != "CONVERGED" or ref.get("reason") != "wrong minimum":
         return None
     what = "outliers" if regime.outliers else "noise"
     return (
-        f"the {what} move the lowest minimum out of the truth's basin: the fit from the "
-        f"truth converges {ref.get('excess', float('nan')):.1e} (relative) above it, "
+        f"the {what} move the lowest minimum out of the truth's basin: the descent from "
+        f"the truth converges {ref.get('excess', float('nan')):.1e} (relative) above it, "
         f"{ref.get('u_distance', float('nan')):.2g} away in the optimiser space"
     )
 

@@ -176,6 +176,33 @@ def test_corrupted_data_whose_optimum_left_the_truths_basin_are_not_identifiable
     assert "1 identifiable (1 not: walter/ngan/outliers)" in line
 
 
+def test_the_truths_basin_is_the_plain_descent_from_the_truth_not_the_screened_reference():
+    # Brady with outliers under low_e2 at 685196d: the reference, with its screen, left
+    # the truth's basin and reached the lowest minimum, so the reference-based rule
+    # counted the case identifiable while the lowest minimum was as far from the truth
+    # as the worse ones. The plain descent from the truth decides instead.
+    case = _scored("outliers", 0.15)
+    assert case["identifiable"]  # no local fit stored: the reference decides
+    point = {"kd": [0.1, 0.2, 0.3], "f0": [0.9, 0.6, 0.3], "alpha": 0.6}
+    local = {"status": "CONVERGED", "finite": True, "objective": 1.001, "params": point,
+             "n_steps": 5, "wall_time": 0.1}  # fmt: skip
+    case = stress.score({**_scored("outliers", 0.15), "local": local})
+    assert case["local"]["reason"] == "wrong minimum"
+    assert not case["identifiable"]
+    assert "descent from the truth converges 1.0e-03" in case["not_identifiable_reason"]
+    assert case["failures"] == {}  # the local fit is no start: it is not counted
+    # The same local fit on noise-free data proves nothing: the truth is exact there.
+    clean = stress.score({**_scored("baseline", 0.15), "local": local})
+    assert clean["identifiable"]
+
+
+def test_a_corrupted_case_records_the_plain_descent_from_the_truth():
+    d = stress.run_case("walter", "low_e2", "noise30", n_starts=1, n_samples=300)
+    assert d["local"]["status"] == "CONVERGED" and d["local"]["objective"] is not None
+    assert "local" not in stress.run_case("lambert", "low_e2", "baseline", n_starts=1,
+                                          n_samples=300)  # fmt: skip
+
+
 def test_a_narrow_lafortune_lobe_stays_bounded_and_dynamic_range_freezes_the_ridge():
     spec = stress.case_spec("lafortune", stress.REGIMES["near_mirror"])
     assert spec.truth["n_1"] > 1e3 and float(spec.truth["cxy_1"]) == -1.0
