@@ -72,8 +72,10 @@ def _solve(
 ):
     """LM in unconstrained space; scalars with ``active == False`` stay at ``u0``.
 
-    Returns ``(u, result, steps, loss, step)``: ``step`` is the trust-region step size
-    LM ended with (optimistix starts it at 1; its damping is ``1 / step``).
+    Returns ``(u, result, steps, loss, step)``: ``loss`` is the metric's loss, or with a
+    robust loss the objective LM minimises (``0.5 sum rho(r)^2``: a descent that sheds
+    outliers raises the plain loss while it lowers this); ``step`` is the trust-region
+    step size LM ended with (optimistix starts it at 1; its damping is ``1 / step``).
 
     LM works on ``v = cscale * u`` with the residuals multiplied by ``rscale`` (see
     :func:`_scales`): optimistix damps with ``lambda I``, so scaling the columns of
@@ -90,7 +92,11 @@ def _solve(
     u = jnp.where(active, sol.value / cscale, u0)
     f = model.evaluate(_natural(free, u, frozen), prep.g)
     step = sol.state.search_state.step_size  # LM's damping at the end is 1 / step
-    return u, sol.result, sol.stats["num_steps"], metrics_mod.loss(metric, f, prep), step
+    if robust is None:
+        loss = metrics_mod.loss(metric, f, prep)
+    else:
+        loss = metrics_mod.objective(metric, f, prep, robust, scale)
+    return u, sol.result, sol.stats["num_steps"], loss, step
 
 
 def _cost_at(model, free, metric, robust, u, prep, frozen, scale):
