@@ -11,9 +11,11 @@ number so that the screen too differs from start to start).
 **Recovery.** A start is recovered when its fit is finite, converged (``Status.CONVERGED``)
 and its final objective ``J`` (``0.5 sum rho(r)^2``, what LM minimises: the metric's
 residuals, robust ones when the regime fits with a robust loss, all at one robust scale)
-lies within ``REL_TOL J_best + ABS_TOL J_0`` of the best ``J_best`` over the reference and
-every start; ``J_0`` is the objective of the zero BRDF (the data's own energy), so the
-floor only matters for noise-free data, where ``J_best`` is ~0. Every other end is a
+lies within ``REL_TOL J_best + ABS_TOL J_0`` of the best ``J_best`` over the reference,
+every start and the truth itself (``truth_objective``: a fit that ends above the truth's
+own objective has missed the truth's basin, whatever the other fits did); ``J_0`` is the
+objective of the zero BRDF (the data's own energy), so the floor only matters for
+noise-free data, where ``J_best`` is ~0. Every other end is a
 failure with its reason: the solver status (``MAX_STEPS``, with whether ``J`` was already
 within the tolerance, ``SOLVER_FAILED``, ``NONFINITE``), ``wrong minimum`` (converged, but
 ``J`` above the tolerance), ``stalled next to the minimum`` (the same, within
@@ -77,7 +79,7 @@ from brdffit.fit import fit
 from brdffit.geometry import halfdiff_to_io
 from brdffit.measurements import Measurements
 from brdffit.metrics import get_metric, prepare
-from brdffit.result import nan_to_none
+from brdffit.result import FitResult, nan_to_none
 from brdffit.tables import render
 
 N_STARTS = 20
@@ -712,24 +714,13 @@ def case_fit(
     )
 
 
-def _one_fit(
-    model,
-    data,
-    metric: str,
-    regime: Regime,
-    spec: CaseSpec,
-    init: dict,
-    scale,
-    max_steps: int,
-    seed: int = 0,
-    screen: int | None = None,
-):
-    """Run one fit (``seed`` seeds its screen, ``screen`` as in :func:`case_fit`);
-    returns (record dict, FitResult or None)."""
+def _one_fit(run: Callable[[], FitResult]) -> tuple[dict, FitResult | None]:
+    """Run one fit, ``run()`` (a :func:`case_fit` call), and record it; returns (record
+    dict, FitResult or None when it raised)."""
 
     t0 = time.perf_counter()
     try:
-        r = case_fit(model, data, metric, regime, spec, init, scale, max_steps, seed, screen)
+        r = run()
     except Exception as e:  # recorded as a failure, the suite goes on
         return {
             "status": "EXCEPTION",
@@ -831,21 +822,25 @@ def run_case(
         n_fitted=prep.n,
     )
     free_truth = {k: v for k, v in spec.truth.items() if k not in spec.freeze}
-    ref, ref_result = _one_fit(model, data, metric, regime, spec, free_truth, None, max_steps)
+
+    def one_fit(init: dict, scale, **kw) -> tuple[dict, FitResult | None]:
+        return _one_fit(
+            lambda: case_fit(model, data, metric, regime, spec, init, scale, max_steps, **kw)
+        )
+
+    ref, ref_result = one_fit(free_truth, None)
     scale = ref_result.robust_scale if ref_result is not None else None
     robust_scale = 1.0 if scale is None else float(scale)
     starts = []
     for i in range(n_starts):
         init = case_start(model, spec, i)
-        rec, _ = _one_fit(model, data, metric, regime, spec, init, scale, max_steps, seed=i + 1)
+        rec, _ = one_fit(init, scale, seed=i + 1)
         rec["seed"] = i
         rec["init"] = {k: np.asarray(v).tolist() for k, v in init.items()}
         starts.append(rec)
     extra = {}
     if corrupts(regime):  # the truth's basin: a plain descent from the truth, no screen
-        extra["local"], _ = _one_fit(
-            model, data, metric, regime, spec, free_truth, scale, max_steps, screen=0
-        )
+        extra["local"], _ = one_fit(free_truth, scale, screen=0)
     for rec in [ref, *starts, *extra.values()]:
         rec["objective"] = (
             objective(model, metric, regime.robust, robust_scale, rec["params"], prep)
@@ -853,7 +848,9 @@ def run_case(
             else None
         )
     j0 = zero_objective(metric, regime.robust, robust_scale, prep)
-    out.update(robust_scale=scale, zero_objective=j0, reference=ref, starts=starts, **extra)
+    jt = objective(model, metric, regime.robust, robust_scale, spec.truth, prep)
+    out.update(robust_scale=scale, zero_objective=j0, truth_objective=jt, reference=ref,
+               starts=starts, **extra)  # fmt: skip
     score(out, model)
     out["case_time"] = time.perf_counter() - t_case
     return out
@@ -873,6 +870,9 @@ def score(case: dict, model=None) -> dict:
     freeze = set(case.get("frozen", ()))
     fits = [ref, *starts, *([local] if local else [])]
     finite = [r for r in fits if r.get("objective") is not None and math.isfinite(r["objective"])]
+    jt = case.get("truth_objective")
+    if jt is not None and math.isfinite(jt):  # the truth itself bounds the best minimum
+        finite.append({"objective": jt, "params": case["truth"]})
     best_rec = min(finite, key=lambda r: r["objective"]) if finite else None
     best = best_rec["objective"] if best_rec else float("nan")
     tol = REL_TOL * abs(best) + ABS_TOL * j0 if best_rec else float("nan")
@@ -895,7 +895,7 @@ def score(case: dict, model=None) -> dict:
             if rec.get("excess") is not None:
                 excess.setdefault(why, []).append(rec["excess"])
     declared = NOT_IDENTIFIABLE.get((case["model"], case["regime"]))
-    reason = declared or _optimum_moved(REGIMES.get(case["regime"]), local or ref)
+    reason = declared or _optimum_moved(REGIMES.get(case["regime"]), local or ref, jt)
     case.update(identifiable=reason is None, not_identifiable_reason=reason)
     n_ok = sum(r["recovered"] for r in starts)
     steps = [r["n_steps"] for r in starts if r.get("n_steps") is not None]
@@ -921,7 +921,7 @@ def corrupts(regime: Regime) -> bool:
     return bool(regime.noise_mult or regime.outliers)
 
 
-def _optimum_moved(regime: Regime | None, ref: dict) -> str | None:
+def _optimum_moved(regime: Regime | None, ref: dict, truth_objective=None) -> str | None:
     """Why a case is not identifiable from its data, or None: in a regime that corrupts
     the data (noise, outliers), the descent from the truth converged to a distinct
     minimum (a wrong minimum, not a stall) that some start beat.
@@ -932,11 +932,14 @@ def _optimum_moved(regime: Regime | None, ref: dict) -> str | None:
     elsewhere, the lowest minimum is not the truth's: the corruption decides which of
     several minima is lowest, and reaching it is a search among minima that say nothing
     about the material. On noise-free data the truth is an exact minimum, so there a
-    failed reference stays the fitter's failure.
+    failed reference stays the fitter's failure, and so does a descent that ends above
+    ``truth_objective``, the objective at the truth itself (it did not descend).
     """
     if regime is None or not corrupts(regime):
         return None
     if ref.get("status") != "CONVERGED" or ref.get("reason") != "wrong minimum":
+        return None
+    if truth_objective is not None and not ref["objective"] <= truth_objective:
         return None
     what = "outliers" if regime.outliers else "noise"
     return (
