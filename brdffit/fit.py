@@ -643,6 +643,28 @@ def _best_descent(
     return best, best_start, steps
 
 
+def _robust_restart(
+    problem: _Problem, starts: Sequence[Params], small, prep, max_steps: int
+) -> tuple[_Descent, Params, int]:
+    """The best descent under the robust loss of ``problem`` from each of ``starts`` on
+    ``small``, finished on ``prep``, with its start and the steps spent on ``small``
+    (0 when ``small`` is ``prep``: then the descents ran on every sample).
+
+    Outliers drag the plain optimum into a corner of its bounds, and the robust descent
+    from there can stay in that corner with its pins: on the stress suite's 1% x100
+    outliers under ngan (linear in the BRDF, so such a cell weighs 1e4 more), every
+    course Cook-Torrance fit with a Huber loss, the one from the truth too, ended with
+    the albedo at [1, 1, 0] and F0 at 1 in green, 4% above the truth's own robust
+    objective. Descending the starts under the robust loss directly avoids the corner;
+    the fit keeps whichever robust descent ends lowest.
+    """
+    alt, alt_start, steps = _best_descent(problem, starts, small, max_steps)
+    if small is prep:
+        return alt, alt_start, 0
+    d = problem.descend(alt.u, prep, alt.active, max_steps, chunk=_FINISH_CHUNK)
+    return d, alt_start, steps
+
+
 def _covariance(
     j: np.ndarray, r: np.ndarray, method: str, n_free: int
 ) -> tuple[np.ndarray | None, float, str | None, np.ndarray]:
@@ -779,13 +801,19 @@ def fit(
         best = problem.descend(best.u, prep, best.active, max_steps, chunk=_FINISH_CHUNK)
     else:
         coarse_steps = 0
-    # Stage 3: the robust loss, from the plain optimum.
+    # Stage 3: the robust loss, from the plain optimum and from every start.
     scale = None
     if robust is not None:
         scale = robust_scale or _robust_scale(problem, best.u, prep, robust)
         problem = problem.with_robust(robust, scale)
         d = problem.descend(best.u, prep, best.active, max_steps)
-        best = _Descent(d.u, d.result, best.steps + d.steps, d.loss, d.active)
+        plain_steps = best.steps
+        best = _Descent(d.u, d.result, plain_steps + d.steps, d.loss, d.active)
+        alt, alt_start, alt_coarse = _robust_restart(problem, starts, small, prep, max_steps)
+        coarse_steps += alt_coarse
+        if alt.loss < best.loss:  # False for a NaN
+            best = _Descent(alt.u, alt.result, plain_steps + alt.steps, alt.loss, alt.active)
+            best_start = alt_start
 
     params = {k: np.asarray(v) for k, v in _natural(layout.free, best.u, frozen).items()}
     finite = math.isfinite(best.loss) and all(np.all(np.isfinite(v)) for v in params.values())
