@@ -745,7 +745,9 @@ def fit(
       residuals (:func:`brdffit.metrics.robust_residuals`) against outliers. The fit
       first converges without it; ``robust_scale`` (residual units) defaults to the
       tuning constant (1.345 Huber, 2.385 Cauchy) times 1.4826 MAD of those residuals.
-      The reported ``loss`` stays the metric's own value.
+      Then the plain optimum and every start are descended under the robust loss
+      (``_robust_restart``), and the lowest robust objective wins. The reported
+      ``loss`` stays the metric's own value.
     - ``coarse``: the starts run on every k-th sample, at most ``coarse`` of them, and
       the best one is then finished on all samples (``None``: starts on all samples).
       Only data with more than twice ``coarse`` samples are thinned.

@@ -932,8 +932,9 @@ def _optimum_moved(regime: Regime | None, ref: dict, truth_objective=None) -> st
     elsewhere, the lowest minimum is not the truth's: the corruption decides which of
     several minima is lowest, and reaching it is a search among minima that say nothing
     about the material. On noise-free data the truth is an exact minimum, so there a
-    failed reference stays the fitter's failure, and so does a descent that ends above
-    ``truth_objective``, the objective at the truth itself (it did not descend).
+    failed reference stays the fitter's failure. A descent that ends above
+    ``truth_objective``, the objective at the truth itself, did not descend: that too
+    stays the fitter's failure, whatever the data.
     """
     if regime is None or not corrupts(regime):
         return None
