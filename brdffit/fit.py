@@ -489,8 +489,10 @@ def _start_params(model: AbstractModel, init: Mapping[str, object] | None) -> Pa
 
 
 def _with_linear_start(
-    model: AbstractModel, metric, layout: ParameterLayout, params: Params, prep
+    model: AbstractModel, metric, layout: ParameterLayout, params: Params, prep, margin=1e-3
 ) -> Params:
+    """``params`` with the affine parameters solved by :func:`_linear_solve`, clipped
+    ``margin`` of their span inside their bounds."""
     lin = tuple(p for p in layout.free if p.linear)
     if not lin:
         return params
@@ -501,7 +503,7 @@ def _with_linear_start(
     for p in lin:
         lo, hi = p.bounds
         span = (hi - lo) if math.isfinite(hi - lo) else max(abs(lo), 1.0)
-        v = np.clip(x[i : i + p.size], lo + 1e-3 * span, hi - 1e-3 * span)
+        v = np.clip(x[i : i + p.size], lo + margin * span, hi - margin * span)
         out[p.name] = jnp.asarray(v.reshape(p.shape))
         i += p.size
     return out
@@ -641,6 +643,29 @@ def _best_descent(
         if best is None or key < best_key:
             best, best_start, best_key = d, s, key
     return best, best_start, steps
+
+
+def _unpin_linear(problem: _Problem, best: _Descent, prep, max_steps: int) -> _Descent:
+    """``best``, or a better descent when an affine scalar ended pinned on a bound.
+
+    A scalar past ``|u| = 12`` is pinned, and the release probe there can point outward
+    for an optimum deeper in the tail (Blinn-Phong under ngan at a 1e7 dynamic range:
+    18 of 20 stress starts pinned the albedo, truth 4e-5, to 0). The affine parameters
+    are solved again by linear least squares at the end point (clipped only 1e-9 of
+    their span inside their bounds), and the fit descends from there with every scalar
+    free; the result is kept only if its loss is lower.
+    """
+    layout = problem.layout
+    linear = np.concatenate([np.full(p.size, p.linear) for p in layout.free] or [[]])
+    if not np.any(linear & ~best.active):
+        return best
+    params = {**_natural(layout.free, best.u, problem.frozen), **problem.frozen}
+    s = _with_linear_start(problem.model, problem.metric, layout, params, prep, margin=1e-9)
+    everywhere = np.ones(layout.size, bool)
+    d = problem.descend(layout.unconstrained(s), prep, everywhere, max_steps)
+    if not d.loss < best.loss * (1 - 1e-12):
+        return _Descent(best.u, best.result, best.steps + d.steps, best.loss, best.active)
+    return _Descent(d.u, d.result, best.steps + d.steps, d.loss, d.active)
 
 
 def _robust_restart(
@@ -803,6 +828,7 @@ def fit(
         best = problem.descend(best.u, prep, best.active, max_steps, chunk=_FINISH_CHUNK)
     else:
         coarse_steps = 0
+    best = _unpin_linear(problem, best, prep, max_steps)
     # Stage 3: the robust loss, from the plain optimum and from every start.
     scale = None
     if robust is not None:
