@@ -656,10 +656,10 @@ def _unpin_linear(problem: _Problem, best: _Descent, prep, max_steps: int) -> _D
     free; the result is kept only if its loss is lower.
     """
     layout = problem.layout
-    linear = np.concatenate([np.full(p.size, p.linear) for p in layout.free] or [[]])
+    linear = np.array([p.linear for p in layout.free for _ in range(p.size)], bool)
     if not np.any(linear & ~best.active):
         return best
-    params = {**_natural(layout.free, best.u, problem.frozen), **problem.frozen}
+    params = _natural(layout.free, best.u, problem.frozen)
     s = _with_linear_start(problem.model, problem.metric, layout, params, prep, margin=1e-9)
     everywhere = np.ones(layout.size, bool)
     d = problem.descend(layout.unconstrained(s), prep, everywhere, max_steps)
@@ -668,26 +668,17 @@ def _unpin_linear(problem: _Problem, best: _Descent, prep, max_steps: int) -> _D
     return _Descent(d.u, d.result, best.steps + d.steps, d.loss, d.active)
 
 
-def _robust_restart(
+def _best_finished(
     problem: _Problem, starts: Sequence[Params], small, prep, max_steps: int
 ) -> tuple[_Descent, Params, int]:
-    """The best descent under the robust loss of ``problem`` from each of ``starts`` on
-    ``small``, finished on ``prep``, with its start and the steps spent on ``small``
-    (0 when ``small`` is ``prep``: then the descents ran on every sample).
-
-    Outliers drag the plain optimum into a corner of its bounds, and the robust descent
-    from there can stay in that corner with its pins: on the stress suite's 1% x100
-    outliers under ngan (linear in the BRDF, so such a cell weighs 1e4 more), every
-    course Cook-Torrance fit with a Huber loss, the one from the truth too, ended with
-    the albedo at [1, 1, 0] and F0 at 1 in green, 4% above the truth's own robust
-    objective. Descending the starts under the robust loss directly avoids the corner;
-    the fit keeps whichever robust descent ends lowest.
-    """
-    alt, alt_start, steps = _best_descent(problem, starts, small, max_steps)
+    """The best descent of :func:`_best_descent` on ``small``, finished on ``prep``, with
+    its start and the steps spent on ``small`` (0 when ``small`` is ``prep``: then the
+    descents ran on every sample and the winner's own steps are all that count)."""
+    best, best_start, steps = _best_descent(problem, starts, small, max_steps)
     if small is prep:
-        return alt, alt_start, 0
-    d = problem.descend(alt.u, prep, alt.active, max_steps, chunk=_FINISH_CHUNK)
-    return d, alt_start, steps
+        return best, best_start, 0
+    d = problem.descend(best.u, prep, best.active, max_steps, chunk=_FINISH_CHUNK)
+    return d, best_start, steps
 
 
 def _covariance(
@@ -771,7 +762,7 @@ def fit(
       first converges without it; ``robust_scale`` (residual units) defaults to the
       tuning constant (1.345 Huber, 2.385 Cauchy) times 1.4826 MAD of those residuals.
       Then the plain optimum and every start are descended under the robust loss
-      (``_robust_restart``), and the lowest robust objective wins. The reported
+      (``_best_finished``), and the lowest robust objective wins. The reported
       ``loss`` stays the metric's own value.
     - ``coarse``: the starts run on every k-th sample, at most ``coarse`` of them, and
       the best one is then finished on all samples (``None``: starts on all samples).
@@ -821,15 +812,15 @@ def fit(
             problem, plain, preps, coarse, rng, screen, max_steps
         )
         starts += [] if extra is None else [extra]
-    best, best_start, coarse_steps = _best_descent(problem, starts, small, max_steps)
-    coarse_steps += extra_steps
     # Stage 2: finish the winner on every sample (its pins carried over, re-checked).
-    if small is not prep:
-        best = problem.descend(best.u, prep, best.active, max_steps, chunk=_FINISH_CHUNK)
-    else:
-        coarse_steps = 0
+    best, best_start, coarse_steps = _best_finished(problem, starts, small, prep, max_steps)
+    coarse_steps += extra_steps if small is not prep else 0
     best = _unpin_linear(problem, best, prep, max_steps)
-    # Stage 3: the robust loss, from the plain optimum and from every start.
+    # Stage 3: the robust loss, from the plain optimum and from every start: outliers
+    # can drag the plain optimum into a corner of its bounds and the robust descent from
+    # there stays in it with its pins (course Cook-Torrance under ngan, 1% of cells x100:
+    # every Huber fit, the one from the truth too, ended with the albedo at [1, 1, 0],
+    # 4% above the truth's own robust objective).
     scale = None
     if robust is not None:
         scale = robust_scale or _robust_scale(problem, best.u, prep, robust)
@@ -837,7 +828,7 @@ def fit(
         d = problem.descend(best.u, prep, best.active, max_steps)
         plain_steps = best.steps
         best = _Descent(d.u, d.result, plain_steps + d.steps, d.loss, d.active)
-        alt, alt_start, alt_coarse = _robust_restart(problem, starts, small, prep, max_steps)
+        alt, alt_start, alt_coarse = _best_finished(problem, starts, small, prep, max_steps)
         coarse_steps += alt_coarse
         if alt.loss < best.loss:  # False for a NaN
             best = _Descent(alt.u, alt.result, plain_steps + alt.steps, alt.loss, alt.active)

@@ -838,10 +838,9 @@ def run_case(
         rec["seed"] = i
         rec["init"] = {k: np.asarray(v).tolist() for k, v in init.items()}
         starts.append(rec)
-    extra = {}
-    if corrupts(regime):  # the truth's basin: a plain descent from the truth, no screen
-        extra["local"], _ = one_fit(free_truth, scale, screen=0)
-    for rec in [ref, *starts, *extra.values()]:
+    # the truth's basin: a plain descent from the truth, no screen
+    local = one_fit(free_truth, scale, screen=0)[0] if corrupts(regime) else None
+    for rec in [ref, *starts, *([local] if local else [])]:
         rec["objective"] = (
             objective(model, metric, regime.robust, robust_scale, rec["params"], prep)
             if rec.get("params") is not None and rec["finite"]
@@ -850,7 +849,7 @@ def run_case(
     j0 = zero_objective(metric, regime.robust, robust_scale, prep)
     jt = objective(model, metric, regime.robust, robust_scale, spec.truth, prep)
     out.update(robust_scale=scale, zero_objective=j0, truth_objective=jt, reference=ref,
-               starts=starts, **extra)  # fmt: skip
+               starts=starts, **({"local": local} if local else {}))  # fmt: skip
     score(out, model)
     out["case_time"] = time.perf_counter() - t_case
     return out
