@@ -27,13 +27,13 @@ from brdffit import stress
 from brdffit.atomic import write_text
 
 
-def _names(text: str, known: list[str], what: str) -> list[str]:
+def _names(ap: argparse.ArgumentParser, text: str, known: list[str], what: str) -> list[str]:
     if text == "all":
         return known
     names = [s.strip() for s in text.split(",") if s.strip()]
     bad = [n for n in names if n not in known]
     if bad:
-        sys.exit(f"unknown {what}: {', '.join(bad)}; known: {', '.join(known)}")
+        ap.error(f"--{what}s: unknown {what} {', '.join(bad)}; known: {', '.join(known)}")
     return names
 
 
@@ -62,9 +62,9 @@ def main() -> None:
         from brdffit.metrics import METRICS
 
         brdffit.enable_compilation_cache()
-        models = _names(args.models, sorted(stress.ROLES), "model")
-        metrics = _names(args.metrics, list(METRICS), "metric")
-        regimes = _names(args.regimes, list(stress.REGIMES), "regime")
+        models = _names(ap, args.models, sorted(stress.ROLES), "model")
+        metrics = _names(ap, args.metrics, list(METRICS), "metric")
+        regimes = _names(ap, args.regimes, list(stress.REGIMES), "regime")
         n_cases = len(models) * len(metrics) * len(regimes)
         print(
             f"# {n_cases} cases: {len(models)} models x {len(metrics)} metrics x "
@@ -87,8 +87,12 @@ def main() -> None:
         print(f"# {n} cases run in {time.perf_counter() - t0:.0f} s", flush=True)
     rows = stress.load_results(out)
     if not rows:
-        sys.exit(f"{out}: no finished case")
-    text = stress.format_table(rows) + "\n\n" + stress.summary(rows) + "\n"
+        print(f"stability.py: error: {out}: no finished case", file=sys.stderr)
+        sys.exit(2)
+    text = (
+        "\n\n".join([stress.format_matrix(rows), stress.format_table(rows), stress.summary(rows)])
+        + "\n"
+    )
     print(text)
     errors = sorted(out.glob("*.error.json"))
     if errors:

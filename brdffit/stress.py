@@ -1159,6 +1159,33 @@ def format_table(rows: Sequence[dict]) -> str:
     return render(head, body, "markdown").rstrip("\n")
 
 
+def format_matrix(rows: Sequence[dict]) -> str:
+    """Recovery % per model (rows) and regime (columns), one Markdown table per metric.
+
+    A cell is the recovery in percent, ``n/a`` for a case that does not apply, ``NI``
+    appended for a case that is not identifiable, and empty for a case not run.
+    """
+    by_key = {(d["model"], d["metric"], d["regime"]): d for d in rows}
+    regimes = [r for r in REGIMES if any(d["regime"] == r for d in rows)]
+    blocks = []
+    for metric in dict.fromkeys(d["metric"] for d in rows):
+        body = []
+        for model in sorted({d["model"] for d in rows if d["metric"] == metric}):
+            cells = [model]
+            for regime in regimes:
+                d = by_key.get((model, metric, regime))
+                if d is None:
+                    cells.append("")
+                elif not d.get("applicable", False):
+                    cells.append("n/a")
+                else:
+                    ni = "" if d.get("identifiable") else " NI"
+                    cells.append(f"{100 * d['recovery']:.0f}{ni}")
+            body.append(cells)
+        blocks.append(f"{metric}:\n\n" + render(["model", *regimes], body, "markdown"))
+    return "\n".join(blocks).rstrip("\n")
+
+
 def summary(rows: Sequence[dict]) -> str:
     """One line: cases run, not applicable, identifiable ones (the others named), those
     under the recovery target, fits that ended non-finite (and whether any did so

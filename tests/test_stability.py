@@ -9,6 +9,9 @@ from __future__ import annotations
 
 import json
 import math
+import subprocess
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -141,6 +144,24 @@ def test_table_renders_from_json(tmp_path):
     line = stress.summary(rows)
     assert line.startswith("2 cases: 1 run, 1 not applicable; 1 identifiable, 1 under 95%")
     assert "walter/low_e2/baseline" in line
+    matrix = stress.format_matrix(rows).splitlines()
+    assert matrix[0] == "low_e2:"
+    assert matrix[2] == "| model | baseline | near_mirror |"
+    assert matrix[4:] == ["| lambert |  | n/a |", "| walter | 50 |  |"]
+
+
+def test_the_benchmark_script_exits_2_naming_the_bad_input(tmp_path):
+    script = Path(__file__).parents[1] / "benchmarks" / "stability.py"
+    empty = subprocess.run([sys.executable, script, "--out", tmp_path, "--table"],
+                           capture_output=True, text=True)  # fmt: skip
+    assert empty.returncode == 2
+    assert empty.stderr.strip().splitlines() == [
+        f"stability.py: error: {tmp_path}: no finished case"
+    ]
+    bad = subprocess.run([sys.executable, script, "--out", tmp_path, "--models", "walterr"],
+                         capture_output=True, text=True)  # fmt: skip
+    assert bad.returncode == 2
+    assert "--models: unknown model walterr" in bad.stderr.splitlines()[-1]
 
 
 def _scored(regime: str, ref_alpha: float) -> dict:
