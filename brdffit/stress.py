@@ -920,7 +920,9 @@ def corrupts(regime: Regime) -> bool:
     return bool(regime.noise_mult or regime.outliers)
 
 
-def _optimum_moved(regime: Regime | None, ref: dict, truth_objective=None) -> str | None:
+def _optimum_moved(
+    regime: Regime | None, ref: dict, truth_objective: float | None = None
+) -> str | None:
     """Why a case is not identifiable from its data, or None: in a regime that corrupts
     the data (noise, outliers), the descent from the truth converged to a distinct
     minimum (a wrong minimum, not a stall) that some start beat.
