@@ -218,6 +218,23 @@ def robust_residuals(r: Array, kind: str | None, scale: Array | float) -> Array:
     raise ParameterError(f"robust={kind!r}: use None, 'huber' or 'cauchy'")
 
 
+def robust_weights(r: Array, kind: str | None, scale: Array | float) -> Array:
+    """IRLS weights ``rho'(r^2)`` of the robust loss of :func:`robust_residuals`.
+
+    The gradient of ``0.5 sum rho(r^2)`` is ``J^T (w r)`` with these ``w``; the
+    Gauss-Newton model of the reweighted problem is ``J^T diag(w) J``. ``None``: ones;
+    ``"huber"``: ``min(1, scale / |r|)``; ``"cauchy"``: ``1 / (1 + (r / scale)^2)``.
+    """
+    if kind is None:
+        return jnp.ones_like(r)
+    x = jnp.abs(r) / scale
+    if kind == "huber":
+        return 1.0 / jnp.maximum(x, 1.0)
+    if kind == "cauchy":
+        return 1.0 / (1.0 + x * x)
+    raise ParameterError(f"robust={kind!r}: use None, 'huber' or 'cauchy'")
+
+
 def objective(
     metric: Metric,
     f_model: Array,

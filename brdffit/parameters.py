@@ -9,7 +9,11 @@ Every parameter has a name, a shape (``()`` scalar or ``(3,)`` RGB), bounds
   when ``low > 0`` and ``high == inf``; and ``x = low (high/low)^sigmoid(u)`` (a logit
   in log space) when both bounds are finite and positive.
 
-Fits run in the unconstrained ``u`` space; reports are in the natural ``x`` space.
+Random starts and MCMC walkers live in the unconstrained ``u`` space. The
+least-squares solver works in a third, bounded space (:attr:`Parameter.solver_log`):
+``ln x`` for a positive scale with a positive lower bound (roughness, exponents),
+the natural ``x`` for everything else, with the bounds as a box. Reports are in the
+natural ``x`` space.
 """
 
 from __future__ import annotations
@@ -75,6 +79,18 @@ class Parameter:
         return self.transform == "logit" or (
             self.transform == "log" and math.isfinite(self.bounds[1])
         )
+
+    @property
+    def solver_log(self) -> bool:
+        """True when the least-squares solver works on ``ln x`` (bounds ``ln low, ln high``).
+
+        A ``log`` parameter with ``low > 0`` is a scale that spans decades (roughness
+        1e-4..2, Phong exponents to 1e5): LM's linear model holds over a wider range in
+        ``ln x``. Every other parameter is solved in natural units inside its box: a
+        logit or bounded-log transform flattens towards its bounds, so a parameter whose
+        optimum is on (or next to) a bound crawls there; a box lets it land on it.
+        """
+        return self.transform == "log" and self.bounds[0] > 0
 
     def default_array(self, dtype: jnp.dtype = jnp.float64) -> jax.Array:
         """The default broadcast to the parameter's shape."""
@@ -187,6 +203,46 @@ class ParameterLayout:
             return jnp.zeros((0,))
         return jnp.concatenate(
             [jnp.ravel(p.to_unconstrained(jnp.asarray(params[p.name]))) for p in self.free]
+        )
+
+    def params(
+        self, flat: jax.Array, space: Literal["natural", "unconstrained", "solver"]
+    ) -> Params:
+        """Flat free vector in ``space`` -> natural dict of every parameter (frozen ones too).
+
+        The one place a flat vector becomes the dict a model evaluates; ``solver`` is
+        the space of :attr:`Parameter.solver_log`.
+        """
+        out = dict(self.frozen)
+        for p, v in zip(self.free, self.split(flat).values(), strict=True):
+            if space == "unconstrained":
+                v = p.to_natural(v)
+            elif space == "solver" and p.solver_log:
+                v = jnp.exp(v)
+            out[p.name] = v
+        return out
+
+    def solver_vector(self, params: Mapping[str, jax.Array]) -> jax.Array:
+        """Natural dict -> flat solver-space vector of the free parameters, clipped into the box."""
+        if not self.free:
+            return jnp.zeros((0,))
+        lo, hi = self.bounds_flat()
+        x = jnp.clip(self.join(params), lo, hi)
+        return jnp.where(self.solver_log_mask(), jnp.log(jnp.maximum(x, 1e-300)), x)
+
+    def solver_log_mask(self) -> np.ndarray:
+        """Per free scalar: True where the solver works on ``ln x``."""
+        return np.concatenate(
+            [np.full(p.size, p.solver_log) for p in self.free] or [np.zeros(0, bool)]
+        )
+
+    def solver_bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """The solver space's box: natural bounds, or their logs where :attr:`solver_log`."""
+        lo, hi = self.bounds_flat()
+        log = self.solver_log_mask()
+        return (
+            np.where(log, np.log(np.where(log, lo, 1.0)), lo),
+            np.where(log, np.log(np.where(log, hi, 1.0)), hi),
         )
 
     def bounds_flat(self) -> tuple[np.ndarray, np.ndarray]:

@@ -59,8 +59,9 @@ import numpy as np
 from brdffit import metrics as metrics_mod
 from brdffit.abstract_model import AbstractModel
 from brdffit.errors import ChainTooShortError, ParameterError
-from brdffit.fit import Freeze, _freeze_map, _natural, _start_params
+from brdffit.fit import Freeze
 from brdffit.measurements import Measurements
+from brdffit.objective import Objective, freeze_map, start_params
 from brdffit.parameters import Parameter, ParameterLayout
 from brdffit.result import FitResult
 
@@ -239,25 +240,24 @@ def _log_prior_natural(p: Parameter, x: jax.Array) -> jax.Array:
 class _Target(eqx.Module):
     """The jitted log-posterior in unconstrained coordinates (free scalars + log_sigma)."""
 
-    model: AbstractModel = eqx.field(static=True)
-    free: tuple[Parameter, ...] = eqx.field(static=True)
-    metric: metrics_mod.Metric = eqx.field(static=True)
+    objective: Objective
     priors: tuple = eqx.field(static=True)
 
-    def __call__(self, theta, prep, frozen, scale):
+    def __call__(self, theta, prep, scale):
         u, log_sigma = theta[:-1], theta[-1]
         lp = jnp.where(
             (log_sigma > LOG_SIGMA_BOUNDS[0]) & (log_sigma < LOG_SIGMA_BOUNDS[1]), 0.0, -jnp.inf
         )
         i = 0
-        for p, prior in zip(self.free, self.priors, strict=True):
+        for p, prior in zip(self.objective.free, self.priors, strict=True):
             up = u[i : i + p.size]
             x = p.to_natural(up)
             logdet = jnp.sum(jnp.log(jnp.abs(jax.vmap(jax.grad(p.to_natural))(up))))
             lp = lp + logdet + (prior(x.reshape(p.shape)) if prior else _log_prior_natural(p, x))
             i += p.size
-        params = _natural(self.free, u, frozen)
-        r = metrics_mod.residuals(self.metric, self.model.evaluate(params, prep.g), prep)
+        obj = self.objective
+        params = obj.layout.params(u, "unconstrained")
+        r = metrics_mod.residuals(obj.metric, obj.model.evaluate(params, prep.g), prep)
         sig = jnp.exp(log_sigma) * scale
         ll = -jnp.sum(jnp.log(sig)) - 0.5 * jnp.sum((r / sig) ** 2)
         out = lp + ll
@@ -265,8 +265,8 @@ class _Target(eqx.Module):
 
 
 @eqx.filter_jit
-def _batched(target, thetas, prep, frozen, scale):
-    return jax.vmap(lambda t: target(t, prep, frozen, scale))(thetas)
+def _batched(target, thetas, prep, scale):
+    return jax.vmap(lambda t: target(t, prep, scale))(thetas)
 
 
 @eqx.filter_jit
@@ -342,11 +342,11 @@ def sample(
         raise ParameterError(f"noise={noise!r}: use one of {NOISE_MODELS}")
     if isinstance(init, FitResult):
         metric = metric or init.metric
-        start = _start_params(model, init.params)
+        start = start_params(model, init.params)
     else:
-        start = _start_params(model, init)
+        start = start_params(model, init)
     m = metrics_mod.get_metric(metric or "low_e2")
-    layout = ParameterLayout.build(model.parameters, _freeze_map(model, freeze, start))
+    layout = ParameterLayout.build(model.parameters, freeze_map(model, freeze, start))
     unknown = sorted(set(priors or {}) - {p.name for p in layout.free})
     if unknown:
         raise ParameterError(f"priors given for {unknown}, which are not free parameters")
@@ -370,10 +370,11 @@ def sample(
     n_walkers = n_walkers or max(32, 4 * ndim)
     p0 = u0 + _start_ball(layout, init, u0) * rng.standard_normal((n_walkers, ndim))
 
-    target = _Target(model, layout.free, m, tuple((priors or {}).get(p.name) for p in layout.free))
+    obj = Objective(model, layout.free, frozen, m)
+    target = _Target(obj, tuple((priors or {}).get(p.name) for p in layout.free))
 
     def log_prob(thetas: np.ndarray) -> np.ndarray:
-        return np.asarray(_batched(target, jnp.asarray(thetas), prep, frozen, scale))
+        return np.asarray(_batched(target, jnp.asarray(thetas), prep, scale))
 
     sampler = emcee.EnsembleSampler(n_walkers, ndim, log_prob, vectorize=True)
     sampler.random_state = np.random.RandomState(int(rng.integers(2**31))).get_state()

@@ -1,0 +1,209 @@
+"""Bounded Levenberg-Marquardt as one jitted ``lax.while_loop``: projected steps, active set.
+
+Minimises ``C(z) = 0.5 sum rho(r(z)^2)`` of an :class:`~brdffit.objective.Objective`
+over the box ``lo <= z <= hi``. Each iteration tries one step:
+
+1. **Active set** (Bertsekas 1982, projected Newton): a scalar on a bound whose
+   gradient points out of the box is *binding* and held there; the others are free.
+2. **Damped Gauss-Newton step** on the free scalars:
+   ``(H + lambda D) d = -g`` with ``H = J^T W J``, ``g = J^T W r`` (IRLS weights ``W``
+   of the robust loss, :meth:`Objective.linearize`), solved by Cholesky of the k x k
+   normal matrix. ``D`` is Marquardt's scaling, the running maximum of ``diag(H)``
+   (MINPACK's ``mode = 1``; scipy's ``x_scale="jac"``): the step does not depend on
+   the units of a parameter, and a column can shrink without its damping collapsing.
+3. **Projection** onto the box (Kanzow, Yamashita, Fukushima 2004): the trial is
+   ``clip(z + d)``, so a parameter whose optimum is on its bound lands on it exactly.
+4. **Gain ratio** ``rho = (C(z) - C(trial)) / (-(g.s + 0.5 s.H.s))`` of the projected
+   step ``s``. The step is accepted when ``rho > 0`` (a non-finite trial cost is a
+   rejection), and ``lambda`` follows Nielsen (1999): times
+   ``max(1/3, 1 - (2 rho - 1)^3)`` after an accepted step, times ``nu`` (then
+   ``nu`` doubles) after a rejected one. Only an accepted step costs a Jacobian.
+
+It stops (:class:`Reason`) when the projected gradient is orthogonal to the residuals
+to ``gtol`` (MINPACK's test, scale-invariant: ``max_i |g_i| / (|J_i| |r|)``, binding
+scalars excluded, so this is the first-order Karush-Kuhn-Tucker condition), when an
+accepted step changes the cost by less than ``ftol`` relative both actually and as
+predicted (MINPACK), when a tried step is below ``xtol`` relative in Marquardt's
+scaled norm (MINPACK; scipy checks it on rejected steps too, which ends a descent
+whose every step is rounding), when the cost is exactly zero, or after ``max_steps``
+tried steps. Everything is traced: the whole descent is one XLA while loop, and
+``jax.vmap`` over ``z0`` (starts) or over the data (materials) batches it.
+"""
+
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+from jax import lax
+from jaxtyping import Array, Bool, Float, Int
+
+from brdffit.metrics import Prepared
+from brdffit.objective import Objective
+
+TAU = 1e-3
+"""Initial damping relative to Marquardt's scale: Madsen, Nielsen & Tingleff (2004, sec.
+3.2) recommend 1e-3 for a start that is not known to be close; ours are linear solves."""
+
+
+class Reason(enum.IntEnum):
+    """Why a descent stopped; the first three are convergence."""
+
+    RUNNING = 0
+    GTOL = 1
+    FTOL = 2
+    XTOL = 3
+    MAX_STEPS = 4
+    NONFINITE = 5
+
+    @property
+    def converged(self) -> bool:
+        return self in (Reason.GTOL, Reason.FTOL, Reason.XTOL)
+
+
+@dataclass(frozen=True)
+class Tolerances:
+    """Stopping rule of :func:`solve` (module docstring); each relative and unitless."""
+
+    max_steps: int = 512
+    ftol: float = 1e-10
+    xtol: float = 1e-10
+    gtol: float = 1e-10
+
+
+class Descent(eqx.Module):
+    """State and outcome of one descent (all arrays, so that it vmaps).
+
+    Fields: ``z`` the point (solver space); ``cost`` ``C(z)``; ``g`` and ``h`` the
+    gradient and Gauss-Newton matrix at ``z``; ``lam`` and ``nu`` the damping and its
+    growth factor; ``d`` Marquardt's scale; ``steps`` tried steps; ``reason``
+    (:class:`Reason` value); ``binding`` the scalars held on a bound at the end.
+    """
+
+    z: Float[Array, " k"]
+    cost: Float[Array, ""]
+    g: Float[Array, " k"]
+    h: Float[Array, "k k"]
+    lam: Float[Array, ""]
+    nu: Float[Array, ""]
+    d: Float[Array, " k"]
+    steps: Int[Array, ""]
+    reason: Int[Array, ""]
+    binding: Bool[Array, " k"]
+
+
+def _binding(z: Array, g: Array, lo: Array, hi: Array) -> Array:
+    """Scalars on a bound with the gradient pointing out of the box."""
+    return ((z <= lo) & (g > 0)) | ((z >= hi) & (g < 0))
+
+
+def _gradient_test(cost: Array, g: Array, h: Array, binding: Array) -> Array:
+    """MINPACK's ``max_i |g_i| / (|J_i| |r|)`` over the free scalars (0 for a zero cost)."""
+    col = jnp.sqrt(jnp.maximum(jnp.diag(h), 0.0))
+    rnorm = jnp.sqrt(2.0 * jnp.maximum(cost, 0.0))
+    ratio = jnp.abs(g) / jnp.where(col > 0, col * rnorm, 1.0)
+    ratio = jnp.where((col > 0) & ~binding, ratio, 0.0)
+    return jnp.where(rnorm > 0, jnp.max(ratio, initial=0.0), 0.0)
+
+
+def init(
+    obj: Objective, z0: Array, prep: Prepared, lo: Array, hi: Array, tol: Tolerances
+) -> Descent:
+    """The state at ``z0`` (clipped into the box): one linearisation."""
+    z = jnp.clip(z0, lo, hi)
+    cost, g, h = obj.linearize(z, prep)
+    finite = jnp.isfinite(cost) & jnp.all(jnp.isfinite(g)) & jnp.all(jnp.isfinite(h))
+    binding = _binding(z, g, lo, hi)
+    done = _gradient_test(cost, g, h, binding) <= tol.gtol
+    reason = jnp.where(~finite, Reason.NONFINITE, jnp.where(done, Reason.GTOL, Reason.RUNNING))
+    diag = jnp.diag(h)
+    d = jnp.where(jnp.isfinite(diag) & (diag > 0), diag, 1.0)
+    one = jnp.ones((), z.dtype)
+    return Descent(z, cost, g, h, TAU * one, 2.0 * one, d, jnp.zeros((), int), reason, binding)
+
+
+def step(
+    obj: Objective, s: Descent, prep: Prepared, lo: Array, hi: Array, tol: Tolerances
+) -> Descent:
+    """One tried step (module docstring, items 1-4) and the stopping tests."""
+    free = ~_binding(s.z, s.g, lo, hi)
+    both = free[:, None] & free[None, :]
+    m = jnp.where(both, s.h + s.lam * jnp.diag(s.d), jnp.eye(s.z.size, dtype=s.z.dtype))
+    rhs = jnp.where(free, -s.g, 0.0)
+    chol = jnp.linalg.cholesky(m)
+    d = jax.scipy.linalg.cho_solve((chol, True), rhs)
+    d = jnp.where(jnp.all(jnp.isfinite(d)), d, 0.0)  # lambda overflowed: a null step
+    trial = jnp.clip(s.z + d, lo, hi)
+    sz = trial - s.z
+    predicted = -(s.g @ sz + 0.5 * sz @ s.h @ sz)
+    c_trial = obj.cost(trial, prep)
+    actual = s.cost - c_trial
+    ok = jnp.isfinite(c_trial) & (predicted > 0) & (actual > 0)
+    gain = jnp.where(ok, actual / jnp.where(predicted > 0, predicted, 1.0), 0.0)
+    lam = jnp.where(ok, s.lam * jnp.maximum(1.0 / 3.0, 1.0 - (2.0 * gain - 1.0) ** 3), s.lam * s.nu)
+    nu = jnp.where(ok, 2.0, 2.0 * s.nu)
+
+    def relinearize() -> tuple[Array, Array, Array]:
+        return obj.linearize(trial, prep)
+
+    cost, g, h = lax.cond(ok, relinearize, lambda: (s.cost, s.g, s.h))
+    finite = jnp.all(jnp.isfinite(g)) & jnp.all(jnp.isfinite(h))
+    z = jnp.where(ok, trial, s.z)
+    dscale = jnp.maximum(s.d, jnp.where(jnp.isfinite(jnp.diag(h)), jnp.diag(h), 0.0))
+    binding = _binding(z, g, lo, hi)
+    steps = s.steps + 1
+    root = jnp.sqrt(dscale)
+    small_x = jnp.linalg.norm(root * sz) <= tol.xtol * (tol.xtol + jnp.linalg.norm(root * z))
+    small_f = ok & (actual <= tol.ftol * s.cost) & (predicted <= tol.ftol * s.cost)
+    small_g = _gradient_test(cost, g, h, binding) <= tol.gtol
+    reason = jnp.select(
+        [~finite, cost <= 0, small_g, small_f, small_x, steps >= tol.max_steps],
+        [Reason.NONFINITE, Reason.GTOL, Reason.GTOL, Reason.FTOL, Reason.XTOL, Reason.MAX_STEPS],
+        Reason.RUNNING,
+    )
+    return Descent(z, cost, g, h, lam, nu, dscale, steps, reason, binding)
+
+
+def solve(
+    obj: Objective, z0: Array, prep: Prepared, lo: Array, hi: Array, tol: Tolerances
+) -> Descent:
+    """Descend from ``z0`` until a stopping test holds (module docstring); traceable."""
+
+    def running(s: Descent) -> Array:
+        return s.reason == Reason.RUNNING
+
+    def body(s: Descent) -> Descent:
+        return step(obj, s, prep, lo, hi, tol)
+
+    return lax.while_loop(running, body, init(obj, z0, prep, lo, hi, tol))
+
+
+def batch_size() -> int | None:
+    """Starts (or problems) advanced in lock-step by ``vmap``; ``None``: one at a time.
+
+    A vmapped while loop runs every member until the slowest stops, and its ``cond``
+    becomes a ``select``, so each member pays a Jacobian on rejected steps too. On the
+    CPU that costs more than it saves: walter's 10 starts on 50,000 samples took
+    1.64 s vmapped against 0.75 s one after another in the same compiled loop
+    (``lax.map``). An accelerator runs the batch in parallel, so it gets all of it.
+    """
+    return None if jax.default_backend() == "cpu" else 1 << 30
+
+
+@eqx.filter_jit
+def solve_one(obj: Objective, z0: Array, prep: Prepared, lo: Array, hi: Array, tol: Tolerances):
+    """:func:`solve` compiled for one start."""
+    return solve(obj, z0, prep, lo, hi, tol)
+
+
+@eqx.filter_jit
+def solve_starts(
+    obj: Objective, z0: Array, prep: Prepared, lo: Array, hi: Array, tol: Tolerances, batch
+):
+    """:func:`solve` from every row of ``z0`` (S, k) on the same data, in one compiled
+    loop over the starts (``batch`` of them at a time, :func:`batch_size`)."""
+    size = None if batch is None else min(batch, z0.shape[0])
+    return lax.map(lambda z: solve(obj, z, prep, lo, hi, tol), z0, batch_size=size)

@@ -1,0 +1,104 @@
+"""The bounded LM solver against its definitions and against scipy's trf.
+
+The answer of a descent must be a first-order Karush-Kuhn-Tucker point of the box
+(inside it; zero gradient on free scalars; gradient pointing out on held ones), and
+from the same start it must end no higher than scipy's ``least_squares`` on the same
+residual (an independent implementation of a bounded trust-region method).
+"""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from scipy.optimize import least_squares
+
+from brdffit import lm, metrics, models, synthesize
+from brdffit.measurements import Measurements
+from brdffit.objective import Objective, plain_residuals
+
+TRUTH = {"kd": [0.1, 0.2, 0.3], "f0": [0.9, 0.6, 0.3], "alpha": 0.15}
+
+
+def _solve(obj: Objective, z0, prep, **tol):
+    lo, hi = (jnp.asarray(a) for a in obj.layout.solver_bounds())
+    return lm.solve_one(obj, jnp.asarray(z0), prep, lo, hi, lm.Tolerances(**tol))
+
+
+def _kkt(obj: Objective, d, prep) -> None:
+    lo, hi = obj.layout.solver_bounds()
+    z = np.asarray(d.z)
+    assert np.all(z >= lo) and np.all(z <= hi)
+    cost, g, h = (np.asarray(a) for a in obj.linearize(jnp.asarray(z), prep))
+    scale = np.sqrt(np.diag(h) * 2 * cost)  # MINPACK's |J_i| |r|
+    on_lo, on_hi = z <= lo, z >= hi
+    inside = ~(on_lo | on_hi)
+    # free scalars: the gradient is orthogonal to the residuals to 1e-5. gtol is 1e-10,
+    # but a descent may stop on ftol = 1e-10 instead: a cost within 1e-10 (relative) of a
+    # quadratic minimum leaves a gradient ratio of about sqrt(1e-10) = 1e-5.
+    assert np.all(np.abs(g[inside]) <= 1e-5 * scale[inside]), g / scale
+    assert np.all(g[on_lo] >= 0) and np.all(g[on_hi] <= 0), (g, on_lo, on_hi)
+
+
+@pytest.mark.parametrize("metric", ["low_e2", "ngan"])
+def test_noisy_walter_ends_at_a_kkt_point_no_higher_than_scipy(metric):
+    walter = models.get("walter")
+    data = synthesize(walter, TRUTH, stride=(5, 5, 5), noise_mult=0.05, seed=3)
+    prep = metrics.prepare(data, metrics.get_metric(metric))
+    obj = Objective.build(walter, metric)
+    z0 = obj.layout.solver_vector(walter.defaults())
+    d = _solve(obj, z0, prep)
+    assert lm.Reason(int(d.reason)).converged, lm.Reason(int(d.reason))
+    _kkt(obj, d, prep)
+
+    lo, hi = obj.layout.solver_bounds()
+    ref = least_squares(
+        lambda z: np.asarray(plain_residuals(obj, jnp.asarray(z), prep)),
+        np.asarray(z0),
+        bounds=(lo, hi),
+        method="trf",
+        x_scale="jac",
+        ftol=1e-12,
+        xtol=1e-12,
+        gtol=1e-12,
+    )
+    ours, theirs = float(d.cost), 0.5 * float(ref.fun @ ref.fun)
+    print(f"{metric}: cost {ours:.15g} (brdffit, {int(d.steps)} steps), {theirs:.15g} (scipy)")
+    assert ours <= theirs * (1 + 1e-9)
+
+
+def test_an_optimum_outside_the_box_ends_on_the_bound_with_an_outward_gradient():
+    # Lambert data 1.5x brighter than kd = 1 allows: the unconstrained optimum is 1.5.
+    lam = models.get("lambert")
+    bright = synthesize(lam, {"kd": 1.0}, grid="random", n=3000, seed=0)
+    data = Measurements.from_directions(bright.wi, bright.wo, bright.values * 1.5)
+    prep = metrics.prepare(data, metrics.get_metric("low_e2"))
+    obj = Objective.build(lam, "low_e2")
+    d = _solve(obj, obj.layout.solver_vector({"kd": jnp.full(3, 0.3)}), prep)
+    np.testing.assert_array_equal(np.asarray(d.z), 1.0)  # exactly on the bound
+    assert np.all(np.asarray(d.binding)) and lm.Reason(int(d.reason)).converged
+    _kkt(obj, d, prep)
+
+
+def test_a_robust_descent_minimises_the_robust_objective():
+    # IRLS inside the solver: the gradient it drives to zero is that of 0.5 sum rho.
+    walter = models.get("walter")
+    clean = synthesize(walter, TRUTH, stride=(9, 9, 9), noise_mult=0.02, seed=4)
+    values = clean.values.copy()
+    hit = np.random.default_rng(5).choice(len(values), len(values) // 100, replace=False)
+    values[hit] *= 100.0
+    data = Measurements.from_directions(clean.wi, clean.wo, values, weights=clean.weights)
+    prep = metrics.prepare(data, metrics.get_metric("low_e2"))
+    obj = Objective.build(walter, "low_e2", robust="cauchy", scale=0.01)
+    d = _solve(obj, obj.layout.solver_vector({k: jnp.asarray(v) for k, v in TRUTH.items()}), prep)
+    assert lm.Reason(int(d.reason)).converged
+    _kkt(obj, d, prep)
+
+
+def test_max_steps_counts_tried_steps():
+    walter = models.get("walter")
+    data = synthesize(walter, TRUTH, stride=(9, 9, 9))
+    prep = metrics.prepare(data, metrics.get_metric("low_e2"))
+    obj = Objective.build(walter, "low_e2")
+    d = _solve(obj, obj.layout.solver_vector(walter.defaults()), prep, max_steps=2)
+    assert int(d.steps) == 2 and lm.Reason(int(d.reason)) is lm.Reason.MAX_STEPS
