@@ -1,9 +1,9 @@
 """Numerical-stability stress suite: every model x metric x regime, recovery from random starts.
 
-For each case (model, metric, regime of :data:`brdffit.stress.REGIMES`): synthetic data
+For each case (model, metric, regime of :data:`stress.REGIMES`): synthetic data
 from a truth drawn for the regime, one fit from the truth and ``--starts`` seeded random
 starts; a start is recovered when it is finite, converged and within a relative 1e-6 of
-the best objective (floor 1e-10 of the data's own energy). See ``brdffit/stress.py``.
+the best objective (floor 1e-10 of the data's own energy). See ``benchmarks/stress``.
 
 Each case is written to ``OUT/<model>__<metric>__<regime>.json`` as soon as it finishes
 (atomically), so an interrupted run resumes where it stopped; the Markdown table and a
@@ -23,7 +23,8 @@ import sys
 import time
 from pathlib import Path
 
-from brdffit import stress
+import stress  # benchmarks/stress: the script's folder is on sys.path
+
 from brdffit.atomic import write_text
 
 

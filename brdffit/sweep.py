@@ -28,10 +28,8 @@ Workers are processes started with the ``spawn`` method (JAX is not fork-safe);
 
 from __future__ import annotations
 
-import concurrent.futures as cf
 import functools
 import json
-import multiprocessing
 import os
 import time
 import traceback
@@ -41,10 +39,10 @@ from pathlib import Path
 
 import numpy as np
 
-from brdffit import enable_compilation_cache
 from brdffit.atomic import remove_temporaries, write_text
 from brdffit.errors import SweepError
 from brdffit.families import family_of
+from brdffit.jobs import has_key, run_jobs, write_json
 
 MANIFEST = "sweep.json"
 SETTINGS = ("stride", "cut_deg", "n_restarts", "screen", "seed", "max_steps", "eval_n")
@@ -305,31 +303,22 @@ def run_task(task: Task, out: str) -> dict:
             eval_n=s["eval_n"],
             provenance=provenance(),
         )
-        path.parent.mkdir(parents=True, exist_ok=True)
-        write_text(path, json.dumps(d, indent=1))
-        if err_path.exists():
-            err_path.unlink()
+        write_json(path, d)
+        err_path.unlink(missing_ok=True)
         return {"ok": True, "converged": r.converged, "task": path.name}
     except Exception as e:  # recorded, the sweep goes on
-        info = {
-            "material": task.material.name,
-            "model": task.model,
-            "metric": task.metric,
-            "error": type(e).__name__,
-            "message": str(e),
-            "traceback": traceback.format_exc(),
-        }
-        path.parent.mkdir(parents=True, exist_ok=True)
-        write_text(err_path, json.dumps(info, indent=1))
+        info = {"material": task.material.name, "model": task.model, "metric": task.metric}
+        write_json(err_path, {**info, **_error(e), "traceback": traceback.format_exc()})
         return {"ok": False, "converged": False, "task": path.name, "error": str(e)}
 
 
 def is_finished(path: Path) -> bool:
     """True when ``path`` is a result file that parses and has a loss."""
-    try:
-        return "loss" in json.loads(Path(path).read_text())
-    except (OSError, ValueError):
-        return False
+    return has_key(path, "loss")
+
+
+def _error(e: BaseException) -> dict:
+    return {"error": type(e).__name__, "message": str(e)}
 
 
 def _write_manifest(out: Path, materials, labels, metrics, settings: dict) -> dict:
@@ -439,12 +428,14 @@ def run_sweep(
         )
         bar.update(1)
 
+    def crashed(t: Task, e: BaseException) -> dict:
+        info = {"material": t.material.name, "model": t.model, "metric": t.metric}
+        write_json(t.path(out).with_suffix(".error.json"), {**info, **_error(e)})
+        return {"ok": False, "converged": False, "error": str(e)}
+
+    work = functools.partial(run_task, out=str(out))
     try:
-        if (jobs or os.cpu_count() or 1) <= 1:
-            for t in todo:
-                record(t, run_task(t, str(out)))
-        else:
-            _run_parallel(todo, out, jobs or os.cpu_count() or 1, record)
+        run_jobs(todo, work, record, crashed, jobs or os.cpu_count() or 1)
     finally:
         bar.close()
     return SweepSummary(
@@ -456,30 +447,6 @@ def run_sweep(
         counts["errors"],
         time.perf_counter() - t0,
     )
-
-
-def _run_parallel(todo: list[Task], out: Path, jobs: int, record) -> None:
-    ctx = multiprocessing.get_context("spawn")
-    with cf.ProcessPoolExecutor(
-        max_workers=jobs, mp_context=ctx, initializer=enable_compilation_cache
-    ) as pool:
-        futures = {pool.submit(run_task, t, str(out)): t for t in todo}
-        try:
-            for fut in cf.as_completed(futures):
-                t = futures[fut]
-                try:
-                    status = fut.result()
-                except Exception as e:  # a dead worker: record it, go on
-                    status = {"ok": False, "converged": False, "error": str(e)}
-                    info = {"material": t.material.name, "model": t.model, "metric": t.metric}
-                    info.update(error=type(e).__name__, message=str(e))
-                    err = t.path(out).with_suffix(".error.json")
-                    err.parent.mkdir(parents=True, exist_ok=True)
-                    write_text(err, json.dumps(info, indent=1))
-                record(t, status)
-        except BaseException:
-            pool.shutdown(wait=False, cancel_futures=True)
-            raise
 
 
 def _progress_bar(total: int, n_materials: int, n_finished: int, enabled: bool):

@@ -5,7 +5,7 @@ the defaults finds the labelling of the defaults."""
 
 from __future__ import annotations
 
-from brdffit.stress import ROLES
+from benchmarks.stress import ROLES
 from tests.cases import Case
 
 ROWS: list[Case] = [

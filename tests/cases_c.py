@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
+from benchmarks.stress import ROLES
 from brdffit import models
-from brdffit.stress import ROLES
 from tests.cases import Case
 
 _OFF = dict(

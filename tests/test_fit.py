@@ -7,7 +7,8 @@ import json
 import numpy as np
 import pytest
 
-from brdffit import FitError, FitResult, Status, fit, models, stress, synthesize
+from benchmarks import stress
+from brdffit import FitError, FitResult, Status, fit, models, synthesize
 from brdffit.errors import ParameterError
 from brdffit.measurements import Measurements
 from brdffit.metrics import get_metric, prepare

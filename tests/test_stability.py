@@ -16,7 +16,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from brdffit import models, stress
+from benchmarks import stress
+from brdffit import models
 from brdffit.metrics import get_metric, prepare
 
 
