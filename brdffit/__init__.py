@@ -1,8 +1,9 @@
 """brdffit: fit analytic BRDF models to measured reflectance.
 
 Public API (everything else may change): :func:`read_merl`, :func:`write_merl`,
-:func:`synthesize`, :func:`fit`, :func:`sample`, :func:`rank`, :class:`Measurements`,
-:class:`FitResult`, :class:`Posterior`, :mod:`brdffit.models` and the error types.
+:func:`synthesize`, :func:`fit`, :func:`fit_many`, :func:`sample`, :func:`rank`,
+:class:`Measurements`, :class:`FitResult`, :class:`Posterior`, :mod:`brdffit.models` and
+the error types.
 
 Importing brdffit turns on JAX's 64-bit mode: fits run in float64 by default because
 measured BRDF values span 1e-4 to 1e4. float32 evaluation still works by passing
@@ -45,7 +46,7 @@ from brdffit.errors import (  # noqa: E402
     MeasurementsError,
     ParameterError,
 )
-from brdffit.fit import fit  # noqa: E402
+from brdffit.fit import fit, fit_many  # noqa: E402
 from brdffit.measurements import Measurements  # noqa: E402
 from brdffit.merl import read_merl, write_merl  # noqa: E402
 from brdffit.rank import Ranking, rank  # noqa: E402
@@ -60,6 +61,7 @@ __all__ = [
     "Ranking",
     "Status",
     "fit",
+    "fit_many",
     "rank",
     "read_merl",
     "sample",

@@ -133,7 +133,9 @@ def fit_many(
     if len(sizes) > 1:
         names = ", ".join(f"{d.source}: {p[m.name].n}" for d, p in zip(datasets, per, strict=True))
         raise ParameterError(f"fit_many: data sets keep different sample counts ({names})")
-    outcomes = _Engine(obj, s).run([p[m.name] for p in per], {**first, **obj.frozen})
+    other = starts.OTHER_METRIC[m.log1p]
+    engine = _Engine(obj, s, [p[other] for p in per])
+    outcomes = engine.run([p[m.name] for p in per], {**first, **obj.frozen})
     results = []
     for data, out, mine in zip(datasets, outcomes, per, strict=True):
         o = obj if out.robust_scale is None else obj.with_robust(s.robust, out.robust_scale)
@@ -207,8 +209,8 @@ class _Stage:
 class _Engine:
     """Steps 1-3 of the module docstring for a stack of problems (leading axis P)."""
 
-    def __init__(self, obj: Objective, s: _Settings):
-        self.obj, self.s, self.tol = obj, s, s.tolerances
+    def __init__(self, obj: Objective, s: _Settings, others: list[metrics_mod.Prepared]):
+        self.obj, self.s, self.tol, self.others = obj, s, s.tolerances, others
         lo, hi = obj.layout.solver_bounds()
         self.lo, self.hi = jnp.asarray(lo), jnp.asarray(hi)
 
@@ -217,19 +219,20 @@ class _Engine:
         n_problems = len(preps)
         small = [_subset(p, s.coarse) for p in preps]
         thinned = small[0] is not preps[0]
-        zs = np.stack(
-            [
-                starts.candidates(
-                    obj, first, sm, n_restarts=s.n_restarts, screen=s.screen,
-                    rng=np.random.default_rng(s.seed),
-                )
-                for sm in small
-            ]
-        )  # (P, S, k): every problem gets the same policy  # fmt: skip
+        near, spread = starts.draws(
+            obj.layout, first, n_restarts=s.n_restarts, screen=s.screen,
+            rng=np.random.default_rng(s.seed),
+        )  # fmt: skip
+        zs = np.asarray(self._select(obj, near, spread, small))  # (P, S, k)
+        extra = np.zeros(n_problems, int)
+        if len(spread):
+            cross, extra = self._cross_metric_start(near, spread, small)
+            zs = np.concatenate([zs, cross[:, None, :]], axis=1)
         problems = _Problems(preps, small)
         rows = np.arange(n_problems)
         st = self._stage(obj, zs, problems)
-        origin, steps, coarse_steps = zs[rows, st.pick], st.steps, st.coarse_steps
+        origin, steps = zs[rows, st.pick], st.steps
+        coarse_steps = st.coarse_steps + (extra if thinned else 0)
         scales: list[float | None] = [None] * n_problems
         if s.robust is not None:
             scale = self._robust_scales(st.z, preps)
@@ -253,6 +256,31 @@ class _Engine:
                 )
             )  # fmt: skip
         return out
+
+    def _cross_metric_start(self, near, spread, small) -> tuple[np.ndarray, np.ndarray]:
+        """Step 4 of :mod:`brdffit.starts`: per problem, the lowest descent of the
+        candidates under the other kind of metric, affine parameters solved again under
+        the fit's own; and the steps spent on it."""
+        metric = metrics_mod.get_metric(starts.OTHER_METRIC[self.obj.metric.log1p])
+        oobj = self.obj.with_metric(metric)
+        osmall = [_subset(p, self.s.coarse) for p in self.others]
+        d = self._descend(oobj, self._select(oobj, near, spread, osmall), osmall)
+        cost = np.asarray(d.cost)
+        pick = np.argmin(np.where(np.isfinite(cost), cost, np.inf), axis=1)
+        best = np.asarray(d.z)[np.arange(len(pick)), pick]
+        if len(small) == 1:
+            solved = starts.linear_start_one(self.obj, jnp.asarray(best[0]), small[0])[None]
+        else:
+            solved = _linear_many(self.obj, jnp.asarray(best), _stack(small))
+        return np.asarray(solved), np.asarray(d.steps).sum(axis=1)
+
+    @staticmethod
+    def _select(obj, near, spread, small):
+        """Each problem's starts (same draws, its own affine solves), (P, S, k)."""
+        near, spread = jnp.asarray(near), jnp.asarray(spread)
+        if len(small) == 1:
+            return starts.select_one(obj, near, spread, small[0])[None]
+        return _select_many(obj, near, spread, _stack(small))
 
     def _stage(self, obj, zs, problems: _Problems) -> _Stage:
         """Descend every start of every problem on the thinned samples; finish the lowest
@@ -294,6 +322,16 @@ class _Engine:
             spread = mad if mad > 0 else float(np.sqrt(np.mean(r * r)))
             out.append(metrics_mod.ROBUST_TUNING[self.s.robust] * max(spread, 1e-300))
         return np.asarray(out)
+
+
+@eqx.filter_jit
+def _select_many(obj, near, spread, prep):
+    return lax.map(lambda p: starts.select(obj, near, spread, p), prep)
+
+
+@eqx.filter_jit
+def _linear_many(obj, z, prep):
+    return lax.map(lambda args: starts.linear_start(obj, *args), (z, prep))
 
 
 class _Problems:

@@ -40,7 +40,9 @@ class Parameter:
     Fields: ``name``; ``shape`` ``()`` or ``(3,)``; ``bounds`` (low, high) in natural
     units; ``default`` (a float, broadcast to the shape); ``transform``; ``doc`` the
     meaning with its unit; ``linear`` True when the BRDF is affine in the parameter
-    (albedos, Fresnel F0), so a linear least-squares solve can start it.
+    (albedos, Fresnel F0), so a linear least-squares solve can start it; ``solver``
+    the least-squares solver's space when the transform does not say it
+    (:attr:`solver_log`).
     """
 
     name: str
@@ -50,6 +52,7 @@ class Parameter:
     transform: Transform
     doc: str
     linear: bool = False
+    solver: Literal["natural", "log"] | None = None
 
     def __post_init__(self) -> None:
         lo, hi = self.bounds
@@ -65,6 +68,8 @@ class Parameter:
             raise ParameterError(
                 f"parameter {self.name!r}: 'log' needs low >= 0, and low > 0 when high is finite"
             )
+        if self.solver == "log" and lo < 0:
+            raise ParameterError(f"parameter {self.name!r}: solver 'log' needs low >= 0")
         if self.shape not in ((), (3,)):
             raise ParameterError(f"parameter {self.name!r}: shape {self.shape} not () or (3,)")
 
@@ -86,10 +91,14 @@ class Parameter:
 
         A ``log`` parameter with ``low > 0`` is a scale that spans decades (roughness
         1e-4..2, Phong exponents to 1e5): LM's linear model holds over a wider range in
-        ``ln x``. Every other parameter is solved in natural units inside its box: a
-        logit or bounded-log transform flattens towards its bounds, so a parameter whose
-        optimum is on (or next to) a bound crawls there; a box lets it land on it.
+        ``ln x``. So is a width on ``[0, high]`` whose table says ``solver="log"``
+        (Disney's perceptual roughness: its box in ``ln x`` is open below). Every other
+        parameter is solved in natural units inside its box: a logit or bounded-log
+        transform flattens towards its bounds, so a parameter whose optimum is on (or
+        next to) a bound crawls there; a box lets it land on it.
         """
+        if self.solver is not None:
+            return self.solver == "log"
         return self.transform == "log" and self.bounds[0] > 0
 
     def default_array(self, dtype: jnp.dtype = jnp.float64) -> jax.Array:
@@ -237,13 +246,13 @@ class ParameterLayout:
         )
 
     def solver_bounds(self) -> tuple[np.ndarray, np.ndarray]:
-        """The solver space's box: natural bounds, or their logs where :attr:`solver_log`."""
+        """The solver space's box: natural bounds, or their logs where :attr:`solver_log`
+        (``ln 0 = -inf``: open below)."""
         lo, hi = self.bounds_flat()
         log = self.solver_log_mask()
-        return (
-            np.where(log, np.log(np.where(log, lo, 1.0)), lo),
-            np.where(log, np.log(np.where(log, hi, 1.0)), hi),
-        )
+        with np.errstate(divide="ignore"):
+            log_lo, log_hi = np.log(np.where(log, lo, 1.0)), np.log(np.where(log, hi, 1.0))
+        return np.where(log, log_lo, lo), np.where(log, log_hi, hi)
 
     def bounds_flat(self) -> tuple[np.ndarray, np.ndarray]:
         """Lower and upper bounds of each free scalar."""

@@ -58,7 +58,15 @@ BASE_COLOR = Parameter("base_color", (3,), (0.0, 1.0), 0.5, "logit", "base colou
 METALLIC = _unit("metallic", 0.1, "metallic blend, 0 dielectric .. 1 metal, unitless")
 SUBSURFACE = _unit("subsurface", 0.1, "blend Burley diffuse -> Hanrahan-Krueger, unitless")
 SPECULAR = _unit("specular", 0.5, "dielectric specular, F0 = .08 specular, unitless", True)
-ROUGHNESS = _unit("roughness", 0.5, "perceptual roughness, GGX alpha = roughness^2")
+ROUGHNESS = Parameter(
+    "roughness",
+    (),
+    (0.0, 1.0),
+    0.5,
+    "logit",
+    "perceptual roughness, GGX alpha = roughness^2",
+    solver="log",
+)  # a width: alpha = roughness^2 spans decades near the mirror (fitted in ln roughness)
 SPECULAR_TINT = _unit("specular_tint", 0.1, "tint of the dielectric F0 toward C_tint")
 ANISOTROPIC = _unit("anisotropic", 0.1, "anisotropy, aspect = sqrt(1 - .9 anisotropic)")
 SHEEN = _unit("sheen", 0.1, "sheen strength (grazing F_H lobe), unitless", True)
