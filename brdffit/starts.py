@@ -110,24 +110,40 @@ def _near(layout: ParameterLayout, base: Params, rng: np.random.Generator) -> Pa
     return out
 
 
-def _spread(layout: ParameterLayout, base: Params, rng: np.random.Generator) -> Params:
-    """A candidate anywhere in the nonlinear parameters' ranges (affine ones as ``base``).
+def _spread(
+    layout: ParameterLayout, base: Params, n: int, rng: np.random.Generator
+) -> list[dict[str, object]]:
+    """``n`` candidates filling the nonlinear parameters' ranges (affine ones as ``base``).
 
-    A scalar whose transform saturates is drawn uniform in ``t = sigmoid(u)`` over
-    [0.02, 0.98] (log-uniform over the span of a bounded log parameter); others at
-    ``N(0, 2)`` in ``u`` around ``base``.
+    A scrambled Sobol sequence (``scipy.stats.qmc``) gives each nonlinear scalar a
+    quantile ``q`` in (0, 1), mapped so that the candidates cover the range evenly: a
+    scalar whose transform saturates at ``t = 0.02 + 0.96 q``, ``t = sigmoid(u)``
+    (log-uniform over the span of a bounded log parameter); an identity parameter with
+    finite bounds at the same share of its box (both signs of Lafortune's lobe axes);
+    an unbounded one at ``u = u_base + 2 Phi^-1(q)`` around ``base``.
     """
-    out = dict(base)
-    for p in layout.free:
-        if p.linear:
-            continue
+    from scipy.special import ndtri
+    from scipy.stats import qmc
+
+    shape_free = [p for p in layout.free if not p.linear]
+    dim = sum(p.size for p in shape_free)
+    q = qmc.Sobol(dim, scramble=True, seed=rng).random(n) if dim else np.zeros((n, 0))
+    out = [dict(base) for _ in range(n)]
+    i = 0
+    for p in shape_free:
+        qp = q[:, i : i + p.size].reshape((n,) + p.shape)
+        t = 0.02 + 0.96 * qp
+        lo, hi = p.bounds
         if p.saturates:
-            t = rng.uniform(0.02, 0.98, p.shape)
-            u = np.log(t) - np.log1p(-t)
+            x = np.asarray(p.to_natural(jnp.asarray(np.log(t) - np.log1p(-t))))
+        elif p.transform == "identity" and np.isfinite(lo) and np.isfinite(hi):
+            x = lo + (hi - lo) * t
         else:
             u = np.asarray(p.to_unconstrained(jnp.asarray(base[p.name])))
-            u = u + rng.normal(0.0, 2.0, p.shape)
-        out[p.name] = p.to_natural(jnp.asarray(u))
+            x = np.asarray(p.to_natural(jnp.asarray(u + 2.0 * ndtri(qp))))
+        for c, row in zip(out, x, strict=True):
+            c[p.name] = row
+        i += p.size
     return out
 
 
@@ -148,7 +164,7 @@ def draws(
     near = [first] + [_near(layout, first, rng) for _ in range(n_restarts)]
     spread = []
     if screen and any(not p.linear for p in layout.free):
-        spread = [_spread(layout, first, rng) for _ in range(screen)]
+        spread = _spread(layout, first, screen, rng)
     k = layout.size
     return _stack(layout, near), _stack(layout, spread) if spread else np.zeros((0, k))
 
@@ -180,7 +196,7 @@ def select_one(obj: Objective, near: jax.Array, spread: jax.Array, prep: Prepare
     return select(obj, near, spread, prep)
 
 
-def _stack(layout: ParameterLayout, params: list[Params]) -> np.ndarray:
+def _stack(layout: ParameterLayout, params: list[dict[str, object]]) -> np.ndarray:
     """Natural dicts -> (n, k) solver-space rows, clipped into the box (numpy)."""
     lo, hi = layout.bounds_flat()
     log = layout.solver_log_mask()
