@@ -251,7 +251,10 @@ def build_parser() -> argparse.ArgumentParser:
     fit_args(s)
     s.add_argument("--restarts", type=int, default=1, help="random starts near the first")
     s.add_argument(
-        "--screen", type=int, default=32, help="spread candidates raced for 1-3 more starts"
+        "--screen",
+        type=int,
+        default=32,
+        help="candidates spread over the ranges; the cheapest 8 become starts (0: none)",
     )
     s.add_argument(
         "--robust", choices=["huber", "cauchy"], help="robust loss on the residuals (outliers)"
@@ -292,7 +295,10 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--cut", type=float, default=80.0, help="zenith cut, degrees")
     s.add_argument("--restarts", type=int, default=1, help="random starts near the first")
     s.add_argument(
-        "--screen", type=int, default=32, help="spread candidates raced for 1-3 more starts"
+        "--screen",
+        type=int,
+        default=32,
+        help="candidates spread over the ranges; the cheapest 8 become starts (0: none)",
     )
     s.add_argument("--seed", type=int, default=0)
     s.add_argument("--jobs", type=int, default=None, help="worker processes (default: cores)")

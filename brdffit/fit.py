@@ -2,9 +2,10 @@
 
 :func:`fit` and :func:`fit_many` run the same engine:
 
-1. the candidates of :mod:`brdffit.starts` are descended together by the bounded
-   Levenberg-Marquardt of :mod:`brdffit.lm` (one ``vmap``-ed while loop) on every k-th
-   sample (at most ``coarse`` of them);
+1. the candidates of :mod:`brdffit.starts` (the cross-metric start among them) are
+   descended by the bounded Levenberg-Marquardt of :mod:`brdffit.lm`, all in one
+   compiled call (:func:`brdffit.lm.batch_size`), on every k-th sample (at most
+   ``coarse`` of them);
 2. the lowest is finished on all samples;
 3. with a robust loss, its scale is set from the plain optimum's residuals, and the
    plain optimum and every candidate are descended again under the robust loss (outliers
@@ -18,6 +19,7 @@ solve over them as well.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from collections.abc import Mapping, Sequence
@@ -119,9 +121,13 @@ def fit_many(
     ``freeze``, ``seed``: each problem gets the same start policy, so a result equals
     that of :func:`fit` on its data). Every data set must keep the same number of
     samples after the cut (e.g. texels or materials on one MERL grid); their directions
-    may differ. ``throw=True`` raises on the first problem that did not converge.
+    may differ. ``throw=True`` raises on the first problem that did not converge. Each
+    result's ``wall_time`` is the batch's time up to that result.
     """
     t0 = time.perf_counter()
+    unknown = sorted(set(kwargs) - {f.name for f in dataclasses.fields(_Settings)})
+    if unknown:
+        raise ParameterError(f"fit_many: unknown keyword(s) {unknown}; see brdffit.fit")
     s = _Settings(**kwargs)
     if not datasets:
         raise ParameterError("fit_many: no data set given")

@@ -13,7 +13,7 @@ import numpy as np
 class Status(enum.Enum):
     """How a fit ended; each member's value is a readable message."""
 
-    CONVERGED = "converged: step and loss changes below the tolerances"
+    CONVERGED = "converged: gradient, loss or step change below the tolerances"
     MAX_STEPS = "not converged: stopped at max_steps"
     NONFINITE = "failed: the loss or the parameters became NaN or Inf"
     SOLVER_FAILED = "failed: the solver reported an error"

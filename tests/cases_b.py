@@ -5,7 +5,6 @@ the defaults finds the labelling of the defaults."""
 
 from __future__ import annotations
 
-from benchmarks.stress import ROLES
 from tests.cases import Case
 
 ROWS: list[Case] = [
@@ -18,7 +17,18 @@ ROWS: list[Case] = [
         {"anisotropic": True},
         {"rho_1": [0.3, 0.3, 0.2], "cx_1": 0.9, "cy_1": 0.6, "n_1": 20.0},
     ),
-    Case("lafortune", *ROLES["lafortune"].two_lobes),
+    Case(
+        "lafortune",
+        {"n_lobes": 2},
+        {
+            "rho_1": [0.3, 0.2, 0.1],
+            "cxy_1": -1.3,
+            "n_1": 5.0,
+            "rho_2": [0.2, 0.3, 0.4],
+            "cxy_2": -1.0,
+            "n_2": 300.0,
+        },
+    ),  # fmt: skip
     Case(
         "lafortune",
         {"n_lobes": 2, "anisotropic": True},
@@ -45,7 +55,19 @@ ROWS: list[Case] = [
         {"anisotropic": True},
         {"ks_1": [0.8, 0.8, 0.7], "mx_1": 0.08, "my_1": 0.3, "alpha_1": 0.7},
     ),
-    Case("kurt", *ROLES["kurt"].two_lobes),
+    Case(
+        "kurt",
+        {"n_lobes": 2},
+        {
+            "ks_1": [0.2, 0.1, 0.1],
+            "f0_1": 0.5,
+            "m_1": 0.4,
+            "alpha_1": 0.8,
+            "ks_2": [0.3, 0.4, 0.5],
+            "m_2": 0.05,
+            "alpha_2": 0.2,
+        },
+    ),  # fmt: skip
     Case(
         "nishino_lombardi",
         params={"kd": [0.3, 0.2, 0.1], "f0": [0.9, 0.7, 0.5], "k": 3.0, "m": 200.0},

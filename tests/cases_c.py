@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-from benchmarks.stress import ROLES
 from brdffit import models
 from tests.cases import Case
 
@@ -14,7 +13,11 @@ _OFF = dict(
     metallic=False,
     specular_tint=False,
 )
-_DISNEY = ROLES["disney"].truth  # every Disney parameter, inside its bounds
+_DISNEY = {  # every Disney parameter, inside its bounds
+    "base_color": [0.8, 0.5, 0.2], "metallic": 0.3, "subsurface": 0.4, "specular": 0.6,
+    "roughness": 0.4, "specular_tint": 0.3, "anisotropic": 0.5, "sheen": 0.4,
+    "sheen_tint": 0.6, "clearcoat": 0.5, "clearcoat_gloss": 0.7,
+}  # fmt: skip
 
 
 def _disney(not_identifiable: dict | None = None, **on: bool) -> Case:

@@ -4,14 +4,15 @@ from __future__ import annotations
 
 import json
 
+import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from benchmarks import stress
 from brdffit import FitError, FitResult, Status, fit, models, synthesize
 from brdffit.errors import ParameterError
 from brdffit.measurements import Measurements
 from brdffit.metrics import get_metric, prepare
+from brdffit.objective import Objective
 from tests.cases import CASES
 
 TRUTH = {"kd": [0.1, 0.2, 0.3], "f0": [0.9, 0.6, 0.3], "alpha": 0.15}
@@ -72,7 +73,8 @@ def test_a_fit_that_runs_out_of_steps_is_not_converged(walter):
 
 @pytest.mark.parametrize("max_steps", [1, 2, 3])
 def test_a_fit_never_takes_more_lm_steps_than_max_steps(walter, max_steps):
-    # LM runs in chunks of 8 steps; a chunk used to run whole, so max_steps=1 reported 8.
+    # max_steps counts tried LM steps, accepted or not (the old chunked fitter ran a
+    # whole 8-step chunk, so max_steps=1 reported 8).
     data = synthesize(walter, TRUTH, stride=GRID)
     r = fit(walter, data, "low_e2", max_steps=max_steps, n_restarts=0, screen=0, throw=False)
     assert r.n_steps <= max_steps and r.status is Status.MAX_STEPS, (r.n_steps, r.status)
@@ -93,7 +95,7 @@ def test_a_non_finite_fit_is_reported_failed(walter):
     assert r.status is Status.NONFINITE and not r.converged and r.stderr is None
 
 
-def test_best_fit_on_a_bound_is_pinned_and_flagged():
+def test_best_fit_on_a_bound_is_held_there_and_flagged():
     lam = models.get("lambert")
     bright = synthesize(lam, {"kd": 1.0}, grid="random", n=3000, seed=0)
     data = Measurements.from_directions(bright.wi, bright.wo, bright.values * 1.5)
@@ -152,8 +154,9 @@ def test_a_robust_fit_under_ngan_ends_below_the_truths_own_robust_objective(walt
     data = _with_outliers(clean, 0.01, 100.0, seed=5)
     r = fit(walter, data, "ngan", init=TRUTH, n_restarts=0, screen=0, robust="huber")
     prep = prepare(data, get_metric("ngan"))
+    obj = Objective.build(walter, "ngan", robust="huber", scale=float(r.robust_scale))
     j_fit, j_truth = (
-        stress.objective(walter, "ngan", "huber", float(r.robust_scale), p, prep)
+        float(obj.cost(obj.layout.solver_vector({k: jnp.asarray(v) for k, v in p.items()}), prep))
         for p in (r.params, TRUTH)
     )
     assert r.converged
@@ -167,12 +170,12 @@ def test_coarse_starts_then_all_samples_reach_the_same_optimum(walter):
     assert full.coarse_samples == 0 and thin.coarse_samples == 500 and thin.coarse_steps > 0
     assert thin.n_samples == full.n_samples and thin.converged
     assert thin.loss == pytest.approx(full.loss, rel=1e-9)
-    for name in TRUTH:  # both stop when a chunk lowers the loss < 1e-9: ~1e-4 in parameters
+    for name in TRUTH:  # both stop at ftol = 1e-10 on the loss: ~1e-5 in parameters
         np.testing.assert_allclose(thin.params[name], full.params[name], rtol=1e-3)
     assert "starts on 500 samples" in thin.report()
 
 
-def test_an_albedo_whose_optimum_is_zero_is_pinned_without_a_crawl(walter):
+def test_an_albedo_whose_optimum_is_zero_lands_on_its_bound_without_a_crawl(walter):
     truth = {**TRUTH, "kd": [0.0, 0.2, 0.3]}
     data = synthesize(walter, truth, stride=GRID)
     for metric in ("low_e2", "ngan"):
@@ -194,9 +197,9 @@ def test_unidentified_parameters_are_named():
 
 
 def test_an_optimum_on_the_upper_bound_is_reached_without_a_crawl():
-    # Oren-Nayar with rho = (0, 0.49, 1): before the columns were scaled for a scalar
-    # crawling in its tail, the fit from the truth itself moved rho[b] by 0.013 in u per
-    # chunk and stopped unconverged after 512 steps.
+    # Oren-Nayar with rho = (0, 0.49, 1): in the old logit space the fit from the truth
+    # itself crawled towards rho[b] = 1 and stopped unconverged after 512 steps; a box
+    # bound is reached by projection.
     on = models.get("oren_nayar")
     truth = {"rho": [0.0, 0.4857, 1.0], "sigma": 0.3917}
     data = synthesize(on, truth, grid="random", n=2000, seed=3)
@@ -207,7 +210,7 @@ def test_an_optimum_on_the_upper_bound_is_reached_without_a_crawl():
     np.testing.assert_allclose(r.params["sigma"], truth["sigma"], rtol=1e-6)
 
 
-def test_an_albedo_deep_in_its_tail_is_fitted_not_pinned(walter):
+def test_an_albedo_of_3e_6_is_fitted_not_held_at_zero(walter):
     # kd[r] = 3e-6 was u = -12.7 in the old logit space, where the fitter pinned it to 0;
     # in natural units with box bounds it is an interior point like any other.
     truth = {**TRUTH, "kd": [3e-6, 0.2, 0.3]}

@@ -276,22 +276,20 @@ def _suite_fit(model_name: str, regime_name: str, k: int, metric: str = "ngan"):
 
 def test_an_albedo_next_to_a_near_mirror_lobe_is_solved_not_crawled():
     # Cook-Torrance at m = 1e-3 under the Ngan metric, from the suite's first random
-    # start. kd's column of J is ~1e-5 of the lobe's: under LM's uniform damping the fit
-    # ended MAX_STEPS after 512 steps with kd[r] at 0.134 (truth 0.101) and every other
-    # parameter right to 6 digits (fitter 5375dd5). Damping by each parameter's
-    # sensitivity (fb27939) solves it.
+    # start. kd's column of J is ~1e-5 of the lobe's: under uniform damping (the old
+    # chunked fitter) the fit ended MAX_STEPS with kd[r] at 0.134 (truth 0.101).
+    # Marquardt's column scaling in brdffit.lm makes the damping blind to that.
     spec, r = _suite_fit("cook_torrance", "near_mirror", 0)
     assert r.converged and r.n_steps <= 128, (r.status, r.n_steps)
     np.testing.assert_allclose(r.params["kd"], spec.truth["kd"], rtol=1e-4)
 
 
-@pytest.mark.slow  # Disney's near-mirror fit on 2000 samples: 36-174 s here
-def test_a_grown_trust_region_is_carried_from_chunk_to_chunk():
+@pytest.mark.slow  # Disney's near-mirror fit on 2000 samples
+def test_disney_near_mirror_from_a_random_start_reaches_the_truth():
     # Disney at alpha = 1.1e-3 under the Ngan metric, from the suite's first random start.
-    # With LM's damping restarted in every 8-step chunk (a82aece), each chunk ended
-    # 6.4e3 times less damped than it began and moved ~2e-4 in u: the fit ended
-    # MAX_STEPS after 512 steps at loss 5.2e-3, sheen pinned at 1 (truth 0.36). With the
-    # grown trust region carried over it converges to the truth.
+    # The old chunked fitter restarted LM's damping every 8 steps and ended MAX_STEPS
+    # with sheen pinned at 1 (truth 0.36); the damping now lives in the solver's state,
+    # and the cross-metric start finds the peak's basin.
     spec, r = _suite_fit("disney", "near_mirror", 0)
     assert r.converged, (r.status, r.n_steps, r.loss)
     for name in ("roughness", "sheen", "clearcoat", "clearcoat_gloss"):
@@ -300,9 +298,9 @@ def test_a_grown_trust_region_is_carried_from_chunk_to_chunk():
 
 def test_a_linear_metric_gets_a_start_descended_under_a_log_one():
     # Lafortune on grazing-dominated data with the 80 degree cut, under the Ngan metric,
-    # from the suite's first random start: at 1802e64 every start descended under ngan
-    # alone and the fit ended in a corner: kd = rho_1 = 0 with cxy_1 at -1.3e21 (loss 138).
-    # Descended under low_e2 first, the best start lands in the optimum's basin.
+    # from the suite's first random start: with every start descended under ngan alone
+    # the old fitter ended in a corner (kd = rho_1 = 0, cxy_1 at -1.3e21). The
+    # cross-metric start (brdffit.starts.OTHER_METRIC) is one of the starts since.
     spec, r = _suite_fit("lafortune", "grazing_cut80", 0)
     assert r.converged, (r.status, r.loss)
     for name in ("cxy_1", "n_1", "rho_1", "kd"):
@@ -311,34 +309,30 @@ def test_a_linear_metric_gets_a_start_descended_under_a_log_one():
 
 def test_a_log_metric_gets_a_start_descended_under_a_linear_one():
     # Lafortune with its peak 1e7 above the diffuse floor (n = 2e4), under low_e2, from
-    # the suite's 4th random start: with every start descended under low_e2 alone
-    # (fadaedb) the fit converged with the lobe switched off and the floor at kd = 1
-    # (rho_1 ~ 1e-90, cxy_1 = -3.4e3), 1.7e25 times the optimum's loss. A start
-    # descended under ngan, which weighs the peak, lands in the optimum's basin.
+    # the suite's 4th random start: with every start descended under low_e2 alone the
+    # old fitter converged with the lobe switched off and the floor at kd = 1, 1.7e25
+    # times the optimum's loss. ngan weighs the peak: the cross-metric start.
     spec, r = _suite_fit("lafortune", "dynamic_range", 3, metric="low_e2")
     assert r.converged, (r.status, r.loss)
     for name in ("cxy_1", "n_1", "rho_1", "kd"):
         np.testing.assert_allclose(r.params[name], spec.truth[name], rtol=1e-4, err_msg=name)
 
 
-def test_low_eta_is_not_carried_to_its_bound_by_the_screening_race():
+def test_low_eta_is_not_left_on_its_far_bound():
     # Low's model, truths on their bounds, under the Ngan metric, from the suite's 13th
-    # random start (eta 12.8). With the race under the sensitivity damping alone
-    # (fb27939), the fit ended with eta on its bound at 100, kd[b] 0.96 and ks[r] 1
-    # (truths 1 and 0.56), at 2.9e9 times the optimum's loss: the race's one chunk can
-    # carry eta to 100 and win on that chunk's loss. The uniform-damping race's winner
-    # is a start too now.
+    # random start (eta 12.8). The old fitter's screening race once ended with eta on
+    # its bound at 100 (truth 1.01), 2.9e9 times the optimum's loss: the normalised
+    # Fresnel is nearly flat in angle there, a corner a start must not win.
     spec, r = _suite_fit("low", "at_bounds", 12)
     assert float(r.params["eta"]) < 2.0, r.params
     np.testing.assert_allclose(r.params["eta"], spec.truth["eta"], rtol=1e-4)
     np.testing.assert_allclose(r.params["ks"], spec.truth["ks"], atol=1e-6)
 
 
-def test_an_albedo_pinned_under_a_1e7_peak_is_solved_again_and_freed():
-    # Blinn-Phong under ngan at a 1e7 dynamic range, from the suite's start 3: the fit
-    # pinned the albedo (truth 4e-5 to 8e-5) to 0 and converged 1.3e-10 of the
-    # data's energy above the truth (fitter f43c0ae; 18 of 20 starts did). A linear
-    # solve at the end point frees them (b166bdb).
+def test_an_albedo_under_a_1e7_peak_is_fitted_not_held_at_zero():
+    # Blinn-Phong under ngan at a 1e7 dynamic range, from the suite's start 3: the old
+    # logit-space fitter pinned the albedo (truth 4e-5 to 8e-5) to 0, 1.3e-10 of the
+    # data's energy above the truth. In natural units it is an interior point.
     spec, r = _suite_fit("blinn_phong", "dynamic_range", 3)
     assert r.converged and "kd" not in r.at_bound, (r.status, r.at_bound)
     np.testing.assert_allclose(r.params["kd"], spec.truth["kd"], rtol=1e-3)
