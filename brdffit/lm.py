@@ -17,7 +17,7 @@ over the box ``lo <= z <= hi``. Each iteration tries one step:
    step ``s``. The step is accepted when ``rho > 0`` (a non-finite trial cost is a
    rejection), and ``lambda`` follows Nielsen (1999): times
    ``max(1/3, 1 - (2 rho - 1)^3)`` after an accepted step, times ``nu`` (then
-   ``nu`` doubles) after a rejected one. Only an accepted step costs a Jacobian.
+   ``nu`` doubles) after a rejected one.
 
 It stops (:class:`Reason`) when the projected gradient is orthogonal to the residuals
 to ``gtol`` (MINPACK's test, scale-invariant: ``max_i |g_i| / (|J_i| |r|)``, binding
@@ -26,8 +26,9 @@ accepted step changes the cost by less than ``ftol`` relative both actually and 
 predicted (MINPACK), when a tried step is below ``xtol`` relative in Marquardt's
 scaled norm (MINPACK; scipy checks it on rejected steps too, which ends a descent
 whose every step is rounding), when the cost is exactly zero, or after ``max_steps``
-tried steps. Everything is traced: the whole descent is one XLA while loop, and
-``jax.vmap`` over ``z0`` (starts) or over the data (materials) batches it.
+tried steps. Only an accepted step that stops on none of the step and cost tests
+costs a Jacobian at the new point. Everything is traced: the whole descent is one XLA
+while loop, and ``lax.map`` or ``jax.vmap`` over starts or data sets batches it.
 """
 
 from __future__ import annotations
@@ -146,18 +147,23 @@ def step(
     lam = jnp.where(ok, s.lam * jnp.maximum(1.0 / 3.0, 1.0 - (2.0 * gain - 1.0) ** 3), s.lam * s.nu)
     nu = jnp.where(ok, 2.0, 2.0 * s.nu)
 
+    root = jnp.sqrt(s.d)
+    small_x = jnp.linalg.norm(root * sz) <= tol.xtol * (tol.xtol + jnp.linalg.norm(root * s.z))
+    small_f = ok & (actual <= tol.ftol * s.cost) & (predicted <= tol.ftol * s.cost)
+
     def relinearize() -> tuple[Array, Array, Array]:
         return obj.linearize(trial, prep)
 
-    cost, g, h = lax.cond(ok, relinearize, lambda: (s.cost, s.g, s.h))
+    # the step and cost tests need no Jacobian at the trial: a descent that stops on
+    # them keeps the last one (its gradient and Gauss-Newton matrix are those of the
+    # point one step, below the tolerances, before)
+    cost, g, h = lax.cond(ok & ~small_f & ~small_x, relinearize, lambda: (s.cost, s.g, s.h))
+    cost = jnp.where(ok, c_trial, cost)
     finite = jnp.all(jnp.isfinite(g)) & jnp.all(jnp.isfinite(h))
     z = jnp.where(ok, trial, s.z)
     dscale = jnp.maximum(s.d, jnp.where(jnp.isfinite(jnp.diag(h)), jnp.diag(h), 0.0))
     binding = _binding(z, g, lo, hi)
     steps = s.steps + 1
-    root = jnp.sqrt(dscale)
-    small_x = jnp.linalg.norm(root * sz) <= tol.xtol * (tol.xtol + jnp.linalg.norm(root * z))
-    small_f = ok & (actual <= tol.ftol * s.cost) & (predicted <= tol.ftol * s.cost)
     small_g = _gradient_test(cost, g, h, binding) <= tol.gtol
     reason = jnp.select(
         [~finite, cost <= 0, small_g, small_f, small_x, steps >= tol.max_steps],
