@@ -278,8 +278,7 @@ class _Engine:
         metric = metrics_mod.get_metric(starts.OTHER_METRIC[self.obj.metric.log1p])
         oobj = self.obj.with_metric(metric)
         osmall = [_subset(p, self.s.coarse) for p in self.others]
-        zs = self._select(oobj, near, spread, osmall, starts.CROSS_KEEP)
-        d = self._descend(oobj, zs, osmall)
+        d = self._descend(oobj, self._select(oobj, near, spread, osmall), osmall)
         cost = np.asarray(d.cost)
         pick = np.argmin(np.where(np.isfinite(cost), cost, np.inf), axis=1)
         best = np.asarray(d.z)[np.arange(len(pick)), pick]
@@ -290,12 +289,12 @@ class _Engine:
         return np.asarray(solved), np.asarray(d.steps).sum(axis=1)
 
     @staticmethod
-    def _select(obj, near, spread, small, keep: int = starts.SCREEN_KEEP):
+    def _select(obj, near, spread, small):
         """Each problem's starts (same draws, its own affine solves), (P, S, k)."""
         near, spread = jnp.asarray(near), jnp.asarray(spread)
         if len(small) == 1:
-            return starts.select_one(obj, near, spread, small[0], keep)[None]
-        return _select_many(obj, near, spread, _stack(small), keep)
+            return starts.select_one(obj, near, spread, small[0])[None]
+        return _select_many(obj, near, spread, _stack(small))
 
     def _stage(self, obj, zs, problems: _Problems) -> _Stage:
         """Descend every start of every problem on the thinned samples; finish the lowest
@@ -340,8 +339,8 @@ class _Engine:
 
 
 @eqx.filter_jit
-def _select_many(obj, near, spread, prep, keep):
-    return lax.map(lambda p: starts.select(obj, near, spread, p, keep), prep)
+def _select_many(obj, near, spread, prep):
+    return lax.map(lambda p: starts.select(obj, near, spread, p), prep)
 
 
 @eqx.filter_jit

@@ -11,10 +11,9 @@ The candidates, in order (every one with its affine parameters solved, see
    lobe far too wide or too narrow can end in a corner minimum; the cost over
    candidates spread across the range finds the right basin for a few dozen model
    evaluations);
-4. with the screen on, the *cross-metric start*: the near candidates and the
-   ``CROSS_KEEP`` cheapest of the screen, selected and descended under the other kind
-   of metric (:data:`OTHER_METRIC`); the lowest of those with its affine parameters
-   solved again under the fit's own metric.
+4. with the screen on, the *cross-metric start*: the same candidates selected and
+   descended under the other kind of metric (:data:`OTHER_METRIC`), the lowest of
+   those with its affine parameters solved again under the fit's own metric.
 
 :func:`draws` makes the candidates (they depend on the seed only); :func:`select` solves
 their affine parameters on one problem's data and keeps the screen's cheapest.
@@ -48,12 +47,6 @@ peak: Disney's near-mirror stress case (alpha = 1.1e-3) under ngan recovered 4 t
 20 random starts without this start. Under ``low_e2``'s ``ln(1 + f cos)`` the peak is
 compressed and its basin is wide. The other way round, a log metric all but ignores
 how high a 1e7 peak stands over the floor, and ``ngan`` weighs it."""
-
-CROSS_KEEP = 2
-"""Screened candidates the cross-metric start descends besides the near ones. The old
-fitter, whose cross-metric start the stress suite validated, descended the near starts
-and the other metric's one or two race winners; eight (as the main stage) cost 0.8 s of
-a 3.4 s full-resolution walter fit for no case the stress suite could tell apart."""
 
 RIDGE = 1e-12
 """Tikhonov term of the affine normal equations, relative to their largest diagonal
@@ -176,10 +169,8 @@ def draws(
     return _stack(layout, near), _stack(layout, spread) if spread else np.zeros((0, k))
 
 
-def select(
-    obj: Objective, near: jax.Array, spread: jax.Array, prep: Prepared, keep: int = SCREEN_KEEP
-) -> jax.Array:
-    """The starts (S, k) on ``prep``: every ``near`` row and the ``keep`` cheapest
+def select(obj: Objective, near: jax.Array, spread: jax.Array, prep: Prepared) -> jax.Array:
+    """The starts (S, k) on ``prep``: every ``near`` row and the ``SCREEN_KEEP`` cheapest
     ``spread`` rows, each with its affine parameters solved (traceable; a candidate with
     a non-finite cost sorts last and, if kept, loses its descent)."""
     solve = jax.vmap(lambda z: linear_start(obj, z, prep))
@@ -189,7 +180,7 @@ def select(
     zs = solve(spread)
     costs = jax.vmap(lambda z: obj.cost(z, prep))(zs)
     costs = jnp.where(jnp.isfinite(costs), costs, jnp.inf)
-    order = jnp.argsort(costs, stable=True)[: min(keep, spread.shape[0])]
+    order = jnp.argsort(costs, stable=True)[: min(SCREEN_KEEP, spread.shape[0])]
     return jnp.concatenate([out, zs[order]])
 
 
@@ -200,11 +191,9 @@ def linear_start_one(obj: Objective, z: jax.Array, prep: Prepared) -> jax.Array:
 
 
 @eqx.filter_jit
-def select_one(
-    obj: Objective, near: jax.Array, spread: jax.Array, prep: Prepared, keep: int = SCREEN_KEEP
-) -> jax.Array:
+def select_one(obj: Objective, near: jax.Array, spread: jax.Array, prep: Prepared) -> jax.Array:
     """:func:`select` compiled for one problem."""
-    return select(obj, near, spread, prep, keep)
+    return select(obj, near, spread, prep)
 
 
 def _stack(layout: ParameterLayout, params: list[dict[str, object]]) -> np.ndarray:
