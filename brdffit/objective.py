@@ -101,15 +101,22 @@ class Objective(eqx.Module):
         r = metrics_mod.robust_residuals(self.residuals(z, prep), self.robust, self.scale)
         return 0.5 * jnp.sum(r * r)
 
+    def jacobian(
+        self, z: Float[Array, " k"], prep: Prepared
+    ) -> tuple[Float[Array, " m"], Float[Array, "m k"]]:
+        """``(r, J)``: the plain residuals and their Jacobian in the solver space at ``z``.
+
+        Forward mode: one pass per free scalar, fewer than the residuals by five orders
+        of magnitude on MERL data.
+        """
+        return _residuals_and_jacobian(self, z, prep)
+
     def linearize(
         self, z: Float[Array, " k"], prep: Prepared
     ) -> tuple[Float[Array, ""], Float[Array, " k"], Float[Array, "k k"]]:
-        """``(C, g, H)`` at ``z``: cost, gradient ``J^T W r`` and Gauss-Newton ``J^T W J``.
-
-        ``J`` is forward-mode (one pass per free scalar, fewer than the residuals by
-        five orders of magnitude on MERL data) and never leaves the device.
-        """
-        r, jac = _residuals_and_jacobian(self, z, prep)
+        """``(C, g, H)`` at ``z``: cost, gradient ``J^T W r`` and Gauss-Newton ``J^T W J``
+        (:meth:`jacobian`; ``J`` never leaves the device)."""
+        r, jac = self.jacobian(z, prep)
         w = metrics_mod.robust_weights(r, self.robust, self.scale)
         rr = metrics_mod.robust_residuals(r, self.robust, self.scale)
         wj = jac * w[:, None]
@@ -134,7 +141,11 @@ class Objective(eqx.Module):
             return e, (e, r)
 
         jac, (e, r) = jax.jacfwd(robust, has_aux=True)(x)
-        return jac.T @ jac, (jac * (e * e)[:, None]).T @ jac, e @ e, r @ r
+        # one pass over [J, diag(e) J]: its Gram matrix holds both (0.36 s against 0.46 s
+        # for two products at MERL's full resolution)
+        both = jnp.concatenate([jac, jac * e[:, None]], axis=1)
+        gram, k = both.T @ both, jac.shape[1]
+        return gram[:k, :k], gram[k:, k:], e @ e, r @ r
 
 
 def _residuals_and_jacobian(obj: Objective, z: Array, prep: Prepared) -> tuple[Array, Array]:
