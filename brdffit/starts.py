@@ -198,6 +198,8 @@ def select_one(obj: Objective, near: jax.Array, spread: jax.Array, prep: Prepare
 
 def _stack(layout: ParameterLayout, params: list[dict[str, object]]) -> np.ndarray:
     """Natural dicts -> (n, k) solver-space rows, clipped into the box (numpy)."""
+    if not layout.free:
+        return np.zeros((len(params), 0))
     lo, hi = layout.bounds_flat()
     log = layout.solver_log_mask()
     rows = np.stack([np.concatenate([np.ravel(np.asarray(p[q.name])) for q in layout.free])

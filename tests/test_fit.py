@@ -218,3 +218,11 @@ def test_an_albedo_of_3e_6_is_fitted_not_held_at_zero(walter):
     r = fit(walter, data, "low_e2", n_restarts=0, screen=0)
     assert r.converged and "kd" not in r.at_bound, (r.status, r.at_bound)
     np.testing.assert_allclose(r.params["kd"], truth["kd"], rtol=1e-4)
+
+
+def test_a_fit_with_every_parameter_frozen_evaluates_and_reports():
+    lam = models.get("lambert")
+    data = synthesize(lam, {"kd": 0.5}, stride=GRID)
+    r = fit(lam, data, "low_e2", freeze={"kd": 0.5})
+    assert r.converged and r.n_free == 0 and r.errors_reason == "no free parameter"
+    assert r.loss < 1e-25  # the frozen value is the truth: noise-free data, exact fit
