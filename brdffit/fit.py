@@ -170,10 +170,10 @@ class _Settings:
     n_restarts: int = 1
     screen: int = 32
     seed: int = 0
-    max_steps: int = 512
-    ftol: float = 1e-10
-    xtol: float = 1e-10
-    gtol: float = 1e-10
+    max_steps: int = lm.Tolerances.max_steps
+    ftol: float = lm.Tolerances.ftol
+    xtol: float = lm.Tolerances.xtol
+    gtol: float = lm.Tolerances.gtol
     errors: str = "sandwich"
     robust: str | None = None
     robust_scale: float | None = None
@@ -232,6 +232,7 @@ class _Engine:
         s, obj = self.s, self.obj
         n_problems = len(preps)
         small = [_subset(p, s.coarse) for p in preps]
+        osmall = [_subset(o, s.coarse, like=sm) for o, sm in zip(self.others, small, strict=True)]
         thinned = small[0] is not preps[0]
         near, spread = starts.draws(
             obj.layout, first, n_restarts=s.n_restarts, screen=s.screen,
@@ -240,7 +241,7 @@ class _Engine:
         zs = np.asarray(self._select(obj, near, spread, small))  # (P, S, k)
         extra = np.zeros(n_problems, int)
         if len(spread):
-            cross, extra = self._cross_metric_start(near, spread, small)
+            cross, extra = self._cross_metric_start(near, spread, small, osmall)
             zs = np.concatenate([zs, cross[:, None, :]], axis=1)
         problems = _Problems(preps, small)
         rows = np.arange(n_problems)
@@ -271,13 +272,12 @@ class _Engine:
             )  # fmt: skip
         return out
 
-    def _cross_metric_start(self, near, spread, small) -> tuple[np.ndarray, np.ndarray]:
+    def _cross_metric_start(self, near, spread, small, osmall) -> tuple[np.ndarray, np.ndarray]:
         """Step 4 of :mod:`brdffit.starts`: per problem, the lowest descent of the
-        candidates under the other kind of metric, affine parameters solved again under
-        the fit's own; and the steps spent on it."""
+        candidates under the other kind of metric (on ``osmall``, its thinned data),
+        affine parameters solved again under the fit's own; and the steps spent on it."""
         metric = metrics_mod.get_metric(starts.OTHER_METRIC[self.obj.metric.log1p])
         oobj = self.obj.with_metric(metric)
-        osmall = [_subset(p, self.s.coarse) for p in self.others]
         d = self._descend(oobj, self._select(oobj, near, spread, osmall), osmall)
         cost = np.asarray(d.cost)
         pick = np.argmin(np.where(np.isfinite(cost), cost, np.inf), axis=1)
@@ -367,8 +367,7 @@ def _solve_many(obj, z, prep, lo, hi, tol, batch):
         scale, zz, p = args
         o = obj.with_robust(obj.robust, scale) if per_scale else obj
         if zz.ndim == 2:
-            size = None if batch is None else min(batch, zz.shape[0])
-            return lax.map(lambda z1: lm.solve(o, z1, p, lo, hi, tol), zz, batch_size=size)
+            return lm.solve_batch(o, zz, p, lo, hi, tol, batch)
         return lm.solve(o, zz, p, lo, hi, tol)
 
     scales = obj.scale if per_scale else jnp.zeros(z.shape[0])
@@ -380,9 +379,20 @@ def _stack(preps: list[metrics_mod.Prepared]) -> metrics_mod.Prepared:
     return jax.tree.map(lambda *a: jnp.stack(a), *preps)
 
 
-def _subset(prep: metrics_mod.Prepared, n: int | None) -> metrics_mod.Prepared:
-    """Every k-th kept sample so that at most ``n`` remain (``prep`` itself if no thinning)."""
+def _subset(
+    prep: metrics_mod.Prepared, n: int | None, like: metrics_mod.Prepared | None = None
+) -> metrics_mod.Prepared:
+    """Every k-th kept sample so that at most ``n`` remain (``prep`` itself if no thinning).
+
+    ``like``: the same data thinned already under another metric; its geometry, cosines
+    and values are shared (the metrics differ only in target and weight).
+    """
     if n is None or prep.n <= 2 * n:
         return prep
     idx = jnp.asarray(np.linspace(0, prep.n - 1, n).round().astype(np.int64))
-    return jax.tree.map(lambda a: a[idx], prep)
+    if like is None:
+        return jax.tree.map(lambda a: a[idx], prep)
+    return metrics_mod.Prepared(
+        g=like.g, cos_i=like.cos_i, target=prep.target[idx], weight=prep.weight[idx],
+        values=like.values,
+    )  # fmt: skip

@@ -130,7 +130,7 @@ def step(
     obj: Objective, s: Descent, prep: Prepared, lo: Array, hi: Array, tol: Tolerances
 ) -> Descent:
     """One tried step (module docstring, items 1-4) and the stopping tests."""
-    free = ~_binding(s.z, s.g, lo, hi)
+    free = ~s.binding
     both = free[:, None] & free[None, :]
     m = jnp.where(both, s.h + s.lam * jnp.diag(s.d), jnp.eye(s.z.size, dtype=s.z.dtype))
     rhs = jnp.where(free, -s.g, 0.0)
@@ -205,11 +205,14 @@ def solve_one(obj: Objective, z0: Array, prep: Prepared, lo: Array, hi: Array, t
     return solve(obj, z0, prep, lo, hi, tol)
 
 
-@eqx.filter_jit
-def solve_starts(
+def solve_batch(
     obj: Objective, z0: Array, prep: Prepared, lo: Array, hi: Array, tol: Tolerances, batch
-):
-    """:func:`solve` from every row of ``z0`` (S, k) on the same data, in one compiled
-    loop over the starts (``batch`` of them at a time, :func:`batch_size`)."""
+) -> Descent:
+    """:func:`solve` from every row of ``z0`` (S, k) on the same data, in one loop over
+    the starts (``batch`` of them at a time, :func:`batch_size`); traceable."""
     size = None if batch is None else min(batch, z0.shape[0])
     return lax.map(lambda z: solve(obj, z, prep, lo, hi, tol), z0, batch_size=size)
+
+
+solve_starts = eqx.filter_jit(solve_batch)
+""":func:`solve_batch` compiled for one problem."""

@@ -131,8 +131,8 @@ class Objective(eqx.Module):
         Jacobian with respect to the free natural parameters (the Gauss-Newton form of
         the M-estimator sandwich); ``r.r`` is the plain residuals' sum of squares.
         """
-        x = jnp.where(self.layout.solver_log_mask(), jnp.exp(z), z)
         log = self.layout.solver_log_mask()
+        x = jnp.where(log, jnp.exp(z), z)
 
         def robust(xn: Array) -> tuple[Array, tuple[Array, Array]]:
             zz = jnp.where(log, jnp.log(jnp.where(log, xn, 1.0)), xn)

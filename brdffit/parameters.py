@@ -231,13 +231,15 @@ class ParameterLayout:
             out[p.name] = v
         return out
 
-    def solver_vector(self, params: Mapping[str, jax.Array]) -> jax.Array:
-        """Natural dict -> flat solver-space vector of the free parameters, clipped into the box."""
+    def solver_vector(self, params: Mapping[str, object]) -> np.ndarray:
+        """Natural dict -> flat solver-space vector of the free parameters, clipped into
+        the box (numpy: starts are made on the host)."""
         if not self.free:
-            return jnp.zeros((0,))
+            return np.zeros(0)
         lo, hi = self.bounds_flat()
-        x = jnp.clip(self.join(params), lo, hi)
-        return jnp.where(self.solver_log_mask(), jnp.log(jnp.maximum(x, 1e-300)), x)
+        x = np.concatenate([np.ravel(np.asarray(params[p.name], float)) for p in self.free])
+        x = np.clip(x, lo, hi)
+        return np.where(self.solver_log_mask(), np.log(np.maximum(x, 1e-300)), x)
 
     def solver_log_mask(self) -> np.ndarray:
         """Per free scalar: True where the solver works on ``ln x``."""

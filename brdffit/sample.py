@@ -346,11 +346,11 @@ def sample(
     else:
         start = start_params(model, init)
     m = metrics_mod.get_metric(metric or "low_e2")
-    layout = ParameterLayout.build(model.parameters, freeze_map(model, freeze, start))
+    obj = Objective.build(model, m, freeze_map(model, freeze, start))
+    layout, frozen = obj.layout, obj.frozen
     unknown = sorted(set(priors or {}) - {p.name for p in layout.free})
     if unknown:
         raise ParameterError(f"priors given for {unknown}, which are not free parameters")
-    frozen = {k: jnp.asarray(v, jnp.float64) for k, v in layout.frozen.items()}
     rng = np.random.default_rng(seed)
     keep = np.flatnonzero(metrics_mod.keep_mask(data, cut_deg))
     if keep.size > n_subsample:
@@ -370,7 +370,6 @@ def sample(
     n_walkers = n_walkers or max(32, 4 * ndim)
     p0 = u0 + _start_ball(layout, init, u0) * rng.standard_normal((n_walkers, ndim))
 
-    obj = Objective(model, layout.free, frozen, m)
     target = _Target(obj, tuple((priors or {}).get(p.name) for p in layout.free))
 
     def log_prob(thetas: np.ndarray) -> np.ndarray:

@@ -76,28 +76,12 @@ def linear_start(obj: Objective, z: jax.Array, prep: Prepared) -> jax.Array:
     ata = a.T @ a
     ridge = RIDGE * jnp.max(jnp.diag(ata)) * jnp.eye(ata.shape[0], dtype=ata.dtype)
     x = jax.scipy.linalg.cho_solve((jnp.linalg.cholesky(ata + ridge), True), a.T @ b)
-    solved = dict(zip(names, _split(layout, names, x), strict=True))
-    out = jnp.concatenate(
-        [jnp.ravel(solved[p.name]) if p.name in solved else v for p, v in _pieces(layout, z)]
-    )
+    # the affine scalars sit in z in the order their names (and x) have
+    where = np.flatnonzero(np.concatenate([np.full(p.size, p.name in names) for p in layout.free]))
+    out = z.at[where].set(x)
     lo, hi = layout.solver_bounds()
     out = jnp.clip(out, lo, hi)
     return jnp.where(jnp.all(jnp.isfinite(out)), out, z)
-
-
-def _pieces(layout: ParameterLayout, z: jax.Array):
-    i = 0
-    for p in layout.free:
-        yield p, z[i : i + p.size]
-        i += p.size
-
-
-def _split(layout: ParameterLayout, names: tuple[str, ...], x: jax.Array):
-    i = 0
-    for p in layout.free:
-        if p.name in names:
-            yield x[i : i + p.size].reshape(p.shape)
-            i += p.size
 
 
 def _near(layout: ParameterLayout, base: Params, rng: np.random.Generator) -> Params:
@@ -197,12 +181,5 @@ def select_one(obj: Objective, near: jax.Array, spread: jax.Array, prep: Prepare
 
 
 def _stack(layout: ParameterLayout, params: list[dict[str, object]]) -> np.ndarray:
-    """Natural dicts -> (n, k) solver-space rows, clipped into the box (numpy)."""
-    if not layout.free:
-        return np.zeros((len(params), 0))
-    lo, hi = layout.bounds_flat()
-    log = layout.solver_log_mask()
-    rows = np.stack([np.concatenate([np.ravel(np.asarray(p[q.name])) for q in layout.free])
-                     for p in params])  # fmt: skip
-    rows = np.clip(rows, lo, hi)
-    return np.where(log, np.log(np.maximum(rows, 1e-300)), rows)
+    """Natural dicts -> (n, k) solver-space rows (:meth:`ParameterLayout.solver_vector`)."""
+    return np.stack([layout.solver_vector(p) for p in params]).reshape(len(params), layout.size)

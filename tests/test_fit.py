@@ -156,8 +156,7 @@ def test_a_robust_fit_under_ngan_ends_below_the_truths_own_robust_objective(walt
     prep = prepare(data, get_metric("ngan"))
     obj = Objective.build(walter, "ngan", robust="huber", scale=float(r.robust_scale))
     j_fit, j_truth = (
-        float(obj.cost(obj.layout.solver_vector({k: jnp.asarray(v) for k, v in p.items()}), prep))
-        for p in (r.params, TRUTH)
+        float(obj.cost(jnp.asarray(obj.layout.solver_vector(p)), prep)) for p in (r.params, TRUTH)
     )
     assert r.converged
     assert j_fit <= j_truth * (1 + 1e-9), (j_fit, j_truth)
