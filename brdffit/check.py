@@ -3,10 +3,13 @@
 For each parameter set (the defaults, every parameter at its lower bound, every one
 at its upper bound; an infinite bound is replaced by 1e6) and each dtype (float32,
 float64), :func:`check_model` evaluates ``model.eval`` on :func:`extreme_pairs`
-(normal incidence, grazing at cos 1e-6, wi = wo, mirror pairs) and counts non-finite
-and negative values, non-finite gradients of ``sum(f)`` with respect to every
-parameter scalar, and non-zero values below the horizon. ``brdffit check`` prints
-the rows as a table (:func:`format_table`).
+(normal incidence, grazing at cos 1e-6, wi = wo, mirror pairs) and counts NaN and
+negative values, non-finite gradients of ``sum(f)`` over the pairs with finite values
+with respect to every parameter scalar, and non-zero values below the horizon. A value
+of ``+inf`` is an overflow, counted apart and allowed: the true value exceeds the
+dtype's range (``tests/test_model_precision.py`` holds every model to that in float64
+against a higher-precision reference), and a wrong small finite number would be worse.
+``brdffit check`` prints the rows as a table (:func:`format_table`).
 """
 
 from __future__ import annotations
@@ -85,10 +88,13 @@ class CheckRow:
     """One model x parameter set x dtype check.
 
     Counts are of direction pairs (samples) with any RGB channel affected, except
-    ``nonfinite_grad``, which counts parameter scalars whose gradient of ``sum(f)``
-    is not finite. ``max_f`` is the largest finite value in 1/sr (NaN if none).
+    ``nonfinite_grad``, which counts parameter scalars whose gradient of ``sum(f)`` over
+    the pairs with finite values is not finite. ``overflow_f`` counts pairs with a
+    ``+inf`` value (allowed, module docstring); ``nonfinite_f`` those with NaN or
+    ``-inf``. ``max_f`` is the largest finite value in 1/sr (NaN if none).
     ``bad_grad`` names the parameters with a non-finite gradient; ``bad_pairs`` the
-    extreme pairs with a non-finite or negative value.
+    extreme pairs with a NaN, ``-inf`` or negative value, ``overflow_pairs`` those with
+    ``+inf``.
     """
 
     model: str
@@ -96,6 +102,7 @@ class CheckRow:
     dtype: str
     n: int
     nonfinite_f: int
+    overflow_f: int
     negative_f: int
     nonfinite_grad: int
     below_horizon_nonzero: int
@@ -103,10 +110,11 @@ class CheckRow:
     max_f: float
     bad_grad: tuple[str, ...]
     bad_pairs: tuple[str, ...]
+    overflow_pairs: tuple[str, ...]
 
     @property
     def passed(self) -> bool:
-        """Everything finite, non-negative, zero below the horizon, output in ``dtype``."""
+        """No NaN, non-negative, finite gradients, zero below the horizon, kept ``dtype``."""
         counts = (self.nonfinite_f, self.negative_f, self.nonfinite_grad)
         return not any(counts) and not self.below_horizon_nonzero and self.dtype_kept
 
@@ -118,6 +126,8 @@ class CheckRow:
             parts.append("nonfinite grad: " + ", ".join(self.bad_grad))
         if self.bad_pairs:
             parts.append("bad f at: " + ", ".join(self.bad_pairs))
+        if self.overflow_pairs:
+            parts.append("overflow (+inf, allowed) at: " + ", ".join(self.overflow_pairs))
         if self.below_horizon_nonzero:
             parts.append(f"{self.below_horizon_nonzero} nonzero below horizon")
         if not self.dtype_kept:
@@ -141,7 +151,10 @@ def _below_horizon_nonzero(model: AbstractModel, params: Mapping, wi, wo) -> int
 
 
 def _nonfinite_grads(model: AbstractModel, params: Mapping, wi, wo) -> dict[str, int]:
-    """Parameter name -> number of its scalars whose gradient of ``sum(f)`` is not finite."""
+    """Parameter name -> number of its scalars whose gradient of ``sum(f)`` is not finite.
+
+    ``wi``, ``wo``: the pairs to sum over (those with finite values).
+    """
     grads = jax.grad(lambda p: jnp.sum(model.eval(p, wi, wo)))(params)
     return {k: int(np.sum(~np.isfinite(np.asarray(g)))) for k, g in grads.items()}
 
@@ -161,8 +174,10 @@ def check_params(
     f_arr = model.eval(p, wi, wo)
     f = np.asarray(f_arr)
     finite = np.isfinite(f)
-    nonfinite, negative = _rows_with(~finite), _rows_with(f < 0)
-    grad_bad = _nonfinite_grads(model, p, wi, wo)
+    overflow = _rows_with(f == np.inf)
+    nonfinite, negative = _rows_with(~finite & (f != np.inf)), _rows_with(f < 0)
+    keep = ~_rows_with(~finite)
+    grad_bad = _nonfinite_grads(model, p, wi[keep], wo[keep])
     names = extreme_pair_names()
     return CheckRow(
         model=models.label(model),
@@ -170,6 +185,7 @@ def check_params(
         dtype=dtype,
         n=int(f.shape[0]),
         nonfinite_f=int(np.sum(nonfinite)),
+        overflow_f=int(np.sum(overflow)),
         negative_f=int(np.sum(negative)),
         nonfinite_grad=sum(grad_bad.values()),
         below_horizon_nonzero=_below_horizon_nonzero(model, p, wi, wo),
@@ -177,6 +193,7 @@ def check_params(
         max_f=float(np.max(f[finite])) if finite.any() else float("nan"),
         bad_grad=tuple(k for k, v in grad_bad.items() if v),
         bad_pairs=tuple(k for k, b in zip(names, nonfinite | negative, strict=True) if b),
+        overflow_pairs=tuple(k for k, b in zip(names, overflow, strict=True) if b),
     )
 
 
@@ -205,6 +222,7 @@ TABLE_HEAD = [
     "dtype",
     "n",
     "nonfinite f",
+    "overflow f",
     "negative f",
     "nonfinite grad",
     "below horizon != 0",
@@ -221,6 +239,7 @@ def _cells(r: CheckRow) -> list[str]:
         r.dtype,
         str(r.n),
         str(r.nonfinite_f),
+        str(r.overflow_f),
         str(r.negative_f),
         str(r.nonfinite_grad),
         str(r.below_horizon_nonzero),

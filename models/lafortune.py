@@ -24,9 +24,13 @@ fitting form with an RGB scale per lobe:
   one ratio ``cxy_l`` per lobe. ``n_lobes`` (>= 1) lobes are summed.
 
 Singularities: the base is <= 0 away from the lobe; it is replaced by 1 before the log
-and the lobe set to 0 there (double where). ``base^n`` is ``exp(n log base)`` with the
-exponent capped at 60 (a lobe value of ~1e26 1/sr): with ``|cx| > 1`` and ``n`` near 1e5,
-``base^n`` overflows even float64 at grazing angles, far outside any real material.
+and the lobe set to 0 there (double where). ``base^n`` is ``exp(n log base)``, exact in
+float64 wherever the value is representable. Along mirror pairs ``base`` reaches
+``max(|cx|, |cy|)`` at grazing angles, so with ``|c| > 1`` the lobe exceeds float64's
+largest number (1.8e308 1/sr) once ``n ln|c| > 709``, inside the bounds (``n = 1e5`` with
+``|c| = 1.01`` already does): there the value is ``+inf``, visibly, and a fit rejects
+the point. No real material comes near it (measured BRDFs stay below ~1e5 1/sr). A lobe
+whose scale ``rho`` is 0 contributes 0 even where the lobe overflows (not ``0 inf``).
 Reciprocal (the base is symmetric in ``u`` and ``v``); not energy conserving (``|cx| > 1``
 lobes and ``kd + rho`` up to 2 exceed albedo 1).
 """
@@ -43,9 +47,6 @@ from brdffit.models._terms import INV_PI, lambert
 from brdffit.abstract_model import AbstractModel
 from brdffit.geometry import ShadingGeometry
 from brdffit.parameters import Parameter, Params
-
-LOG_CAP = 60.0
-"""Largest ``n log base`` evaluated: keeps extreme corners of the bounds finite."""
 
 KD = Parameter("kd", (3,), (0.0, 1.0), 0.3, "logit", "diffuse albedo, RGB", linear=True)
 
@@ -83,14 +84,20 @@ def cosine_lobe(
 ) -> jax.Array:
     """Normalised generalised cosine lobe ``(n+2)/(2 pi) max(0, base)^n`` (1/sr), (N,).
 
-    ``base = cx ux vx + cy uy vy + uz vz``; the exponent ``n log base`` is capped at
-    :data:`LOG_CAP`.
+    ``base = cx ux vx + cy uy vy + uz vz``; ``+inf`` where the value exceeds float64.
     """
     base = cx * wi[:, 0] * wo[:, 0] + cy * wi[:, 1] * wo[:, 1] + wi[:, 2] * wo[:, 2]
-    pos = base > 1e-30
+    pos = base > 0.0
     log_base = jnp.log(jnp.where(pos, base, 1.0))
-    lobe = (n + 2.0) * (0.5 * INV_PI) * jnp.exp(jnp.minimum(n * log_base, LOG_CAP))
+    lobe = (n + 2.0) * (0.5 * INV_PI) * jnp.exp(n * log_base)
     return jnp.where(pos, lobe, 0.0)
+
+
+def scaled_lobe(rho: jax.Array, lobe: jax.Array) -> jax.Array:
+    """``rho`` (3,) times ``lobe`` (N,), (N, 3), with ``0 inf`` read as 0 (no lobe, no value)."""
+    finite = jnp.isfinite(lobe)
+    product = rho[None, :] * jnp.where(finite, lobe, 0.0)[:, None]
+    return jnp.where(finite[:, None], product, jnp.where(rho[None, :] > 0.0, jnp.inf, 0.0))
 
 
 @final
@@ -124,5 +131,5 @@ class Lafortune(AbstractModel):
         for l in range(1, self.n_lobes + 1):
             cx, cy = self.ratios(params, l)
             lobe = cosine_lobe(g.wi, g.wo, cx, cy, params[f"n_{l}"])
-            f = f + params[f"rho_{l}"][None, :] * lobe[:, None]
+            f = f + scaled_lobe(params[f"rho_{l}"], lobe)
         return f

@@ -10,7 +10,7 @@ import pytest
 
 from brdffit import models
 from brdffit.abstract_model import AbstractModel
-from brdffit.check import CheckRow, check_model, extreme_pairs, format_table
+from brdffit.check import CheckRow, check_model, check_params, extreme_pairs, format_table
 from brdffit.cli import main
 from brdffit.errors import ParameterError
 from brdffit.geometry import ShadingGeometry
@@ -67,6 +67,28 @@ class LeaksBelowHorizon(AbstractModel):
         return self.core(params, g)
 
 
+class GrazingPower(AbstractModel):
+    """Lambert plus ``(1 / cos_o)^(60 rough)``: overflows at grazing for large ``rough``.
+
+    ``rough = 1`` at cos_o = 1e-6 is 1e360, past every float (3e26 at cos_o 0.36);
+    ``sign`` = -1 makes the same value NaN instead (``inf - inf``), the defect the check
+    must still catch.
+    """
+
+    sign: float = 1.0
+    name: ClassVar[str] = "grazing_power"
+    reference: ClassVar[str] = "test"
+
+    @property
+    def parameters(self) -> tuple[Parameter, ...]:
+        return (KD, ROUGH)
+
+    def core(self, params: Params, g: ShadingGeometry) -> jax.Array:
+        big = jnp.exp(-60.0 * params["rough"] * jnp.log(g.cos_o))
+        spike = big if self.sign > 0 else big - big
+        return params["kd"][None, :] / jnp.pi + spike[:, None]
+
+
 @pytest.mark.parametrize("name", ["lambert", "walter"])
 def test_real_models_pass_every_set_and_dtype(name):
     rows = check_model(models.get(name))
@@ -89,6 +111,18 @@ def test_negative_values_at_grazing_fail_and_name_the_pairs():
         assert r.negative_f == 4 and "normal/grazing" in r.bad_pairs
         assert "bad f at: normal/grazing" in r.note
     assert "FAIL" in format_table(rows)
+
+
+def test_overflow_to_inf_is_counted_apart_and_allowed_but_nan_fails():
+    high = {"kd": jnp.full(3, 0.5), "rough": jnp.asarray(1.0)}
+    for dtype in ("float32", "float64"):
+        over = check_params(GrazingPower(), high, dtype, "high")
+        # wo grazing: normal/grazing, grazing=grazing, grazing/mirror, grazing/90deg
+        assert over.passed and over.overflow_f == 4 and over.nonfinite_f == 0, over
+        assert over.nonfinite_grad == 0  # gradients over the finite pairs
+        assert "overflow (+inf, allowed) at: normal/grazing" in over.note
+        nan = check_params(GrazingPower(sign=-1.0), high, dtype, "high")
+        assert not nan.passed and nan.nonfinite_f == 4 and nan.overflow_f == 0, nan
 
 
 def test_nonfinite_gradient_names_its_parameter_only():
