@@ -1,7 +1,9 @@
 """Default ``brdffit.fit`` against scipy's trf on a full-resolution MERL-format material.
 
-The data: Walter/GGX + Lambert (``TRUTH``) on the full MERL grid with 3% log-normal
-noise (909,696 cells under the 80-degree cut, x 3 channels). For each metric
+The data: Walter/GGX + Lambert (``TRUTH``; ``--model`` any walter spec whose numpy
+form below applies: GGX, uncorrelated exact Smith, isotropic, with or without the
+specular weight ``ks``) on the full MERL grid with 3% log-normal noise (909,696 cells
+under the 80-degree cut, x 3 channels). For each metric
 (``low_e2``, ``ngan``) in one process:
 
 - ``brdffit``: ``fit(model, data, metric)`` with its defaults (starts, screen, coarse
@@ -22,6 +24,7 @@ squares (one start); brdffit runs its own start policy. Losses are compared as t
 numpy residual's sum of squares at each answer. Ratios are scipy time / brdffit warm.
 
 Run: python3 benchmarks/fit_lm.py [--stride 1 1 1] [--repeats 2] [--metrics low_e2 ngan]
+     [--model "walter[specular_weight=false]"]
      python3 benchmarks/fit_lm.py --disney
 
 Latest figures: benchmarks/results/fit_lm.md (this project's 2-core box, CPU).
@@ -42,9 +45,31 @@ from brdffit.merl import merl_subgrid
 from brdffit.metrics import get_metric, keep_mask, prepare
 from brdffit.metrics import residuals as jax_residuals
 
-TRUTH = {"kd": [0.12, 0.30, 0.55], "f0": [0.9, 0.6, 0.3], "alpha": 0.12}
-LO = np.array([0.0] * 6 + [1e-4])
-HI = np.array([1.0] * 6 + [2.0])
+TRUTH = {"kd": [0.12, 0.30, 0.55], "ks": [0.8, 0.8, 0.8], "f0": [0.9, 0.6, 0.3], "alpha": 0.12}
+
+
+class Layout:
+    """The model's free parameters in table order, as one flat natural vector."""
+
+    def __init__(self, model):
+        self.names = [p.name for p in model.parameters]
+        self.sizes = [p.size for p in model.parameters]
+        self.lo = np.concatenate([np.full(p.size, p.bounds[0]) for p in model.parameters])
+        self.hi = np.concatenate([np.full(p.size, p.bounds[1]) for p in model.parameters])
+        self.defaults = np.concatenate([np.ravel(model.defaults()[n]) for n in self.names])
+
+    def unpack(self, x) -> dict:
+        out, i = {}, 0
+        for n, k in zip(self.names, self.sizes, strict=True):
+            out[n] = x[i] if n == "alpha" else x[i : i + k]
+            i += k
+        return out
+
+    def pack(self, params) -> np.ndarray:
+        return np.concatenate([np.ravel(np.asarray(params[n], float)) for n in self.names])
+
+    def index(self, name: str) -> int:
+        return sum(self.sizes[: self.names.index(name)])
 
 
 def geometry(data, keep):
@@ -65,18 +90,23 @@ def geometry(data, keep):
     }
 
 
-def brdf(x, g):
-    """GGX + Lambert (Walter 2007, uncorrelated exact Smith, Schlick) in numpy, (N, 3)."""
-    kd, f0, a = x[0:3], x[3:6], x[6]
+def brdf(p, g):
+    """GGX + Lambert (Walter 2007, uncorrelated exact Smith, Schlick, optional ``ks``).
+
+    ``p``: dict of natural values (numpy); returns (N, 3).
+    """
+    kd, f0, a = p["kd"], p["f0"], p["alpha"]
     d = 1.0 / (np.pi * a * a * (g["sin2h"] / (a * a) + g["ch"] ** 2) ** 2)
     li = 0.5 * (a * a * g["t2i"]) / (np.sqrt(1 + a * a * g["t2i"]) + 1)
     lo = 0.5 * (a * a * g["t2o"]) / (np.sqrt(1 + a * a * g["t2o"]) + 1)
     gg = 1.0 / ((1 + li) * (1 + lo))
     f = f0[None, :] * (1 - g["s5"])[:, None] + g["s5"][:, None]
+    if "ks" in p:
+        f = p["ks"][None, :] * f
     return f * (d * gg / (4 * g["ci"] * g["co"]))[:, None] + kd[None, :] / np.pi
 
 
-def numpy_residual(metric, data, keep, weight):
+def numpy_residual(layout, metric, data, keep, weight):
     """The metric's residual vector in numpy, geometry computed once."""
     g = geometry(data, keep)
     ci = g["ci"][:, None]
@@ -85,18 +115,26 @@ def numpy_residual(metric, data, keep, weight):
     target = np.log1p(np.maximum(fd, -0.999)) if metric.log1p else fd
 
     def residual(x):
-        fm = brdf(x, g) * ci
+        fm = brdf(layout.unpack(x), g) * ci
         side = np.log1p(np.maximum(fm, -0.999)) if metric.log1p else fm
         return (root_w * (side - target)).ravel()
 
     return residual, g
 
 
-def linear_start(metric, data, keep, weight, g):
-    """kd and f0 by weighted linear least squares at the default alpha = 0.2."""
-    x = np.array([0.0] * 6 + [0.2])
-    f_spec = brdf(np.r_[np.zeros(3), np.zeros(3), 0.2], g)  # Schlick's F0-free part
-    f_one = brdf(np.r_[np.zeros(3), np.ones(3), 0.2], g) - f_spec
+def linear_start(layout, metric, data, keep, weight, g):
+    """kd and the specular scale (``ks``, else ``f0``) by weighted linear least squares.
+
+    The other parameters stay at the model's defaults (alpha = 0.2).
+    """
+    x = layout.defaults.copy()
+    scale = "ks" if "ks" in layout.names else "f0"
+    ik, js = layout.index("kd"), layout.index(scale)
+    zero = layout.unpack(x.copy())
+    zero["kd"], zero[scale] = np.zeros(3), np.zeros(3)
+    one = dict(zero, **{scale: np.ones(3)})
+    f_zero = brdf(zero, g)
+    f_one = brdf(one, g) - f_zero
     ci = g["ci"]
     w = np.sqrt(weight) * ci
     if metric.log1p:
@@ -105,37 +143,37 @@ def linear_start(metric, data, keep, weight, g):
         w = np.repeat(w[:, None], 3, axis=1)
     for c in range(3):
         a = np.stack([np.full(len(ci), 1 / np.pi), f_one[:, c]], axis=1) * w[:, c : c + 1]
-        b = (data.values[keep][:, c] - f_spec[:, c]) * w[:, c]
+        b = (data.values[keep][:, c] - f_zero[:, c]) * w[:, c]
         sol = np.linalg.solve(a.T @ a, a.T @ b)
-        x[c], x[3 + c] = sol
-    return np.clip(x, LO, HI)
+        x[ik + c], x[js + c] = sol
+    return np.clip(x, layout.lo, layout.hi)
 
 
-def jax_peer(model, metric, prep):
+def jax_peer(layout, model, metric, prep):
     """Jitted residual and exact forward-mode Jacobian in natural units."""
     import jax
     import jax.numpy as jnp
 
     def res(x):
-        p = {"kd": x[0:3], "f0": x[3:6], "alpha": x[6]}
+        p = layout.unpack(x)
         return jax_residuals(metric, model.evaluate(p, prep.g), prep)
 
     f, j = jax.jit(res), jax.jit(jax.jacfwd(res))
     return (lambda x: np.asarray(f(jnp.asarray(x)))), (lambda x: np.asarray(j(jnp.asarray(x))))
 
 
-def floor(model, metric, prep, x0, repeats):
-    """Seconds of one residual + Jacobian pass and one 7 x 7 Cholesky solve, warm."""
+def floor(layout, model, metric, prep, x0, repeats):
+    """Seconds of one residual + Jacobian pass and one k x k Cholesky solve, warm."""
     import jax
     import jax.numpy as jnp
 
     def res(x):
-        p = {"kd": x[0:3], "f0": x[3:6], "alpha": x[6]}
+        p = layout.unpack(x)
         return jax_residuals(metric, model.evaluate(p, prep.g), prep)
 
     def one(x):
         r, jac = res(x), jax.jacfwd(res)(x)
-        h = jac.T @ jac + 1e-3 * jnp.eye(7)
+        h = jac.T @ jac + 1e-3 * jnp.eye(x.size)
         return jax.scipy.linalg.cho_solve((jnp.linalg.cholesky(h), True), jac.T @ r)
 
     f = jax.jit(one)
@@ -149,7 +187,7 @@ def floor(model, metric, prep, x0, repeats):
     return best
 
 
-def per_step(model, metric_name, prep, x0, repeats, steps: int = 6) -> float:
+def per_step(layout, model, metric_name, prep, x0, repeats, steps: int = 6) -> float:
     """Seconds per linearisation of brdffit's LM, ``steps`` tried steps from ``x0``."""
     import jax.numpy as jnp
 
@@ -157,7 +195,7 @@ def per_step(model, metric_name, prep, x0, repeats, steps: int = 6) -> float:
     from brdffit.objective import Objective
 
     obj = Objective.build(model, metric_name)
-    z0 = obj.layout.solver_vector({"kd": x0[0:3], "f0": x0[3:6], "alpha": x0[6]})
+    z0 = obj.layout.solver_vector(layout.unpack(x0))
     lo, hi = (jnp.asarray(a) for a in obj.layout.solver_bounds())
     tol = lm.Tolerances(max_steps=steps, ftol=0.0, xtol=0.0, gtol=0.0)
     lm.solve_one(obj, z0, prep, lo, hi, tol).z.block_until_ready()
@@ -188,10 +226,6 @@ def disney(repeats: int) -> None:
         )
 
 
-def params_vector(result) -> np.ndarray:
-    return np.concatenate([np.ravel(result.params[k]) for k in ("kd", "f0", "alpha")])
-
-
 def run_metric(name, model, data, repeats):
     from scipy.optimize import least_squares
 
@@ -199,8 +233,9 @@ def run_metric(name, model, data, repeats):
     keep = np.flatnonzero(keep_mask(data, 80.0))
     prep = prepare(data, metric, cut_deg=80.0)
     weight = np.asarray(prep.weight)
-    res, g = numpy_residual(metric, data, keep, weight)
-    x0 = linear_start(metric, data, keep, weight, g)
+    layout = Layout(model)
+    res, g = numpy_residual(layout, metric, data, keep, weight)
+    x0 = linear_start(layout, metric, data, keep, weight, g)
 
     t = time.perf_counter()
     first = fit(model, data, name, throw=False)
@@ -211,7 +246,7 @@ def run_metric(name, model, data, repeats):
         ours = fit(model, data, name, throw=False)
         warm.append(time.perf_counter() - t)
     t_ours = min(warm)
-    loss_ours = float(np.sum(res(params_vector(ours)) ** 2))
+    loss_ours = float(np.sum(res(layout.pack(ours.params)) ** 2))
     print(
         f"{name:7s} brdffit   first {t_first:7.2f} s  warm {t_ours:7.2f} s  "
         f"steps {ours.n_steps:3d} (+{ours.coarse_steps} coarse)  loss {loss_ours:.12g}  "
@@ -220,7 +255,7 @@ def run_metric(name, model, data, repeats):
     )
     tol = {"ftol": 1e-10, "xtol": 1e-10, "gtol": 1e-10}
     t = time.perf_counter()
-    sp = least_squares(res, x0, bounds=(LO, HI), method="trf", x_scale="jac", **tol)
+    sp = least_squares(res, x0, bounds=(layout.lo, layout.hi), method="trf", x_scale="jac", **tol)
     t_sp = time.perf_counter() - t
     loss_sp = float(np.sum(res(sp.x) ** 2))
     print(
@@ -229,10 +264,11 @@ def run_metric(name, model, data, repeats):
         f"loss rel. diff {(loss_ours - loss_sp) / loss_sp:+.2e}",
         flush=True,
     )
-    f_jax, j_jax = jax_peer(model, metric, prep)
+    f_jax, j_jax = jax_peer(layout, model, metric, prep)
     f_jax(x0), j_jax(x0)  # compile outside the clock
     t = time.perf_counter()
-    sj = least_squares(f_jax, x0, jac=j_jax, bounds=(LO, HI), method="trf", x_scale="jac", **tol)
+    box = (layout.lo, layout.hi)
+    sj = least_squares(f_jax, x0, jac=j_jax, bounds=box, method="trf", x_scale="jac", **tol)
     t_sj = time.perf_counter() - t
     loss_sj = float(np.sum(res(sj.x) ** 2))
     print(
@@ -240,8 +276,8 @@ def run_metric(name, model, data, repeats):
         f"ratio {t_sj / t_ours:5.2f}x  loss rel. diff {(loss_ours - loss_sj) / loss_sj:+.2e}",
         flush=True,
     )
-    t_floor = floor(model, metric, prep, x0, repeats + 1)
-    t_step = per_step(model, name, prep, x0, repeats + 1)
+    t_floor = floor(layout, model, metric, prep, x0, repeats + 1)
+    t_step = per_step(layout, model, name, prep, x0, repeats + 1)
     print(
         f"{name:7s} floor (r + J + solve, full grid) {t_floor:6.3f} s; brdffit per step "
         f"{t_step:6.3f} s ({t_step / t_floor:4.2f}x the floor)",
@@ -255,6 +291,7 @@ def main() -> None:
     ap.add_argument("--repeats", type=int, default=2)
     ap.add_argument("--metrics", nargs="+", default=["low_e2", "ngan"])
     ap.add_argument("--disney", action="store_true", help="time Disney's default fit instead")
+    ap.add_argument("--model", default="walter", help="a walter spec (GGX, isotropic)")
     args = ap.parse_args()
     import jax
     import scipy
@@ -269,8 +306,10 @@ def main() -> None:
     if args.disney:
         disney(args.repeats)
         return
-    model = models.get("walter")
-    data = synthesize(model, TRUTH, noise_mult=0.03, seed=0)
+    model = models.from_spec(args.model)
+    truth = {k: v for k, v in TRUTH.items() if k in {p.name for p in model.parameters}}
+    data = synthesize(model, truth, noise_mult=0.03, seed=0)
+    print(f"# {models.label(model)}, truth {truth}")
     if tuple(args.stride) != (1, 1, 1):
         data = merl_subgrid(data, tuple(args.stride))
     print(f"# {data.n} cells, {int(keep_mask(data, 80.0).sum())} fitted samples x 3 channels")

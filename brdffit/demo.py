@@ -23,7 +23,7 @@ from brdffit.rank import rank
 from brdffit.sample import sample
 from brdffit.synthetic import synthesize
 
-TRUTH = {"kd": [0.12, 0.30, 0.55], "f0": [0.045, 0.045, 0.045], "alpha": 0.09}
+TRUTH = {"kd": [0.12, 0.30, 0.55], "ks": [0.8] * 3, "f0": [0.045] * 3, "alpha": 0.09}
 MODELS = ("lambert", "blinn_phong", "walter")
 METRIC = "low_e2"
 

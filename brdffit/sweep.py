@@ -139,8 +139,9 @@ def nbrdf_materials(folder: str | os.PathLike[str], names: Sequence[str] | None 
 def synthetic_materials(n: int, *, seed: int = 0, noise_mult: float = 0.03) -> list[Material]:
     """``n`` synthetic materials cycling plastic, metal, fabric, paint, seeded parameters.
 
-    Plastic: Walter/GGX, kd U(0.05, 0.6), f0 0.04, alpha log-U(0.05, 0.3); metal: Walter,
-    kd U(0, 0.03), f0 U(0.5, 0.95), alpha log-U(0.03, 0.2); fabric: Oren-Nayar, rho
+    Plastic: Walter/GGX, kd U(0.05, 0.6), f0 0.04, alpha log-U(0.05, 0.3), grey specular
+    weight ks U(0.6, 1); metal: Walter, kd U(0, 0.03), f0 U(0.5, 0.95), alpha
+    log-U(0.03, 0.2), ks 1; fabric: Oren-Nayar, rho
     U(0.1, 0.7), sigma U(0.2, 0.8); paint: Blinn-Phong, kd U(0.1, 0.6), ks U(0.02, 0.2),
     n log-U(10, 500). Log-normal noise ``noise_mult``; material i uses seed ``seed + i``.
     """
@@ -157,9 +158,11 @@ def synthetic_materials(n: int, *, seed: int = 0, noise_mult: float = 0.03) -> l
 
         if word == "plastic":
             params = {"kd": u(0.05, 0.6, 3).tolist(), "f0": [0.04] * 3, "alpha": logu(0.05, 0.3)}
+            params["ks"] = [float(u(0.6, 1.0))] * 3
         elif word == "metal":
             params = {"kd": u(0, 0.03, 3).tolist(), "f0": u(0.5, 0.95, 3).tolist()}
             params["alpha"] = logu(0.03, 0.2)
+            params["ks"] = [1.0] * 3
         elif word == "fabric":
             params = {"rho": u(0.1, 0.7, 3).tolist(), "sigma": float(u(0.2, 0.8))}
         else:

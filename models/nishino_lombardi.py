@@ -21,11 +21,14 @@ The papers fit the BRDF itself as ``sum_j (exp(kappa_j(theta_d) cos^gamma_j thet
 with curves ``kappa(theta_d)``, ``gamma(theta_d)``, which absorb Fresnel and shadowing. We
 use one lobe with constant ``k``, ``m`` in the microfacet form the comparison table gives:
 
-    f(wi, wo) = kd / pi + F(wi . h) D(h) G(wi, wo) / (4 cos_i cos_o)
+    f(wi, wo) = kd / pi + ks F(wi . h) D(h) G(wi, wo) / (4 cos_i cos_o)
 
 with Schlick ``F`` (RGB ``f0``) and the Cook-Torrance V-cavity ``G`` (the table's common
 ``G``); the table's ``pi`` in the denominator is read as the ``4`` of a normalised ``D``.
-Affine in ``kd`` and ``f0``.
+``ks`` is the table's specular weight rho_s (RGB); ``specular_weight=False`` removes it
+(``ks = 1``). How ``ks`` and ``f0`` trade off, and why only the Fresnel rise at grazing
+``theta_d`` tells them apart, is said in ``models/walter.py``. Affine in ``kd`` and
+``ks`` (in ``kd`` and ``f0`` without ``ks``), solved linearly for each start of a fit.
 
 Singularities: ``1/(cos_i cos_o)`` is cancelled to first order by ``G``;
 ``cos^m theta_h = exp(m log cos_h)`` with ``log cos_h`` accurate near the normal, and
@@ -35,8 +38,10 @@ Singularities: ``1/(cos_i cos_o)`` is cancelled to first order by ``G``;
 
 from __future__ import annotations
 
+import dataclasses
 from typing import ClassVar, final
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -46,17 +51,19 @@ from brdffit.abstract_model import AbstractModel
 from brdffit.geometry import ShadingGeometry
 from brdffit.parameters import Parameter, Params
 
-PARAMETERS = (
-    Parameter("kd", (3,), (0.0, 1.0), 0.3, "logit", "diffuse albedo, RGB", linear=True),
-    Parameter(
-        "f0",
-        (3,),
-        (0.0, 1.0),
-        0.04,
-        "logit",
-        "Fresnel reflectance at normal incidence, RGB",
-        linear=True,
-    ),
+KD = Parameter("kd", (3,), (0.0, 1.0), 0.3, "logit", "diffuse albedo, RGB", linear=True)
+F0 = Parameter(
+    "f0",
+    (3,),
+    (0.0, 1.0),
+    0.04,
+    "logit",
+    "Fresnel reflectance at normal incidence, RGB",
+    linear=True,
+)
+F0_WEIGHTED = dataclasses.replace(F0, linear=False)  # multiplies ks: not jointly affine
+KS = Parameter("ks", (3,), (0.0, 1.0), 0.9, "logit", "specular weight rho_s, RGB", linear=True)
+LOBE = (
     Parameter("k", (), (1e-3, 1e3), 1.0, "log", "hemi-EPD concentration -kappa, unitless"),
     Parameter("m", (), (0.1, 1e5), 100.0, "log", "hemi-EPD exponent gamma, unitless"),
 )
@@ -85,7 +92,9 @@ def hemi_epd(h: jax.Array, k: jax.Array, m: jax.Array) -> jax.Array:
 
 @final
 class NishinoLombardi(AbstractModel):
-    """Lambert plus a hemi-EPD microfacet lobe with Schlick Fresnel and V-cavity masking."""
+    """Lambert plus a weighted hemi-EPD microfacet lobe, Schlick Fresnel, V-cavity masking."""
+
+    specular_weight: bool = eqx.field(static=True, default=True)
 
     name: ClassVar[str] = "nishino_lombardi"
     reference: ClassVar[str] = "Nishino 2009, ICCV; Nishino, Lombardi 2011, JOSA A 28(1)"
@@ -93,12 +102,13 @@ class NishinoLombardi(AbstractModel):
 
     @property
     def parameters(self) -> tuple[Parameter, ...]:
-        return PARAMETERS
+        spec = (KS, F0_WEIGHTED) if self.specular_weight else (F0,)
+        return (KD, *spec, *LOBE)
 
     def core(self, params: Params, g: ShadingGeometry) -> jax.Array:
         d = hemi_epd(g.h, params["k"], params["m"])
         gg = v_cavity_g(g.cos_h, g.cos_i, g.cos_o, g.cos_d)
-        spec = (
-            schlick_fresnel(params["f0"], g.cos_d) * (d * gg / (4.0 * g.cos_i * g.cos_o))[:, None]
-        )
-        return spec + lambert(params["kd"])
+        f = schlick_fresnel(params["f0"], g.cos_d)
+        if self.specular_weight:
+            f = params["ks"][None, :] * f
+        return f * (d * gg / (4.0 * g.cos_i * g.cos_o))[:, None] + lambert(params["kd"])

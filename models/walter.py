@@ -1,7 +1,7 @@
 """Walter, Marschner, Li and Torrance 2007, "Microfacet models for refraction through
 rough surfaces" (EGSR), reflection part, plus a Lambert diffuse term.
 
-    f(wi, wo) = kd / pi + F(wi . h) G(wi, wo) D(h) / (4 cos_i cos_o)
+    f(wi, wo) = kd / pi + ks F(wi . h) G(wi, wo) D(h) / (4 cos_i cos_o)
 
 * ``D``: GGX (eq. 33) or Beckmann (eq. 25), isotropic ``alpha`` or, with
   ``anisotropic=True``, ``alpha_x`` / ``alpha_y`` along the tangent / bitangent
@@ -10,8 +10,23 @@ rough surfaces" (EGSR), reflection part, plus a Lambert diffuse term.
   Beckmann via erfc), or Walter's rational approximation (eq. 27) for Beckmann
   (``smith="rational"``). ``masking="uncorrelated"`` is ``G1(i) G1(o)`` (Walter eq. 23);
   ``"height_correlated"`` is ``1 / (1 + Lambda_i + Lambda_o)`` (Heitz 2014, eq. 99).
-* ``F``: Schlick with RGB ``f0`` (the table's common Fresnel); the model is affine in
-  ``kd`` and ``f0``, both solved linearly for the start of a fit.
+* ``F``: Schlick with RGB ``f0`` (the table's common Fresnel).
+* ``ks``: the comparison table's specular weight rho_s (RGB, in [0, 1]), as in its
+  microfacet rows ``rho_d/pi + rho_s D G F / (pi (N.L)(N.V))`` (the table's ``pi`` is
+  the ``4`` of a normalised ``D``). It lets the lobe be weaker than Fresnel allows (a
+  dielectric coating that covers part of the surface, a lobe that loses energy to
+  multiple scattering). ``specular_weight=False`` removes it (``ks = 1``, Walter's
+  paper).
+* ``ks`` against ``f0``: per channel the lobe's colour is ``ks (f0 + (1 - f0) w)`` with
+  Schlick's ``w = (1 - cos_d)^5``, i.e. ``a + b w`` with ``a = ks f0`` and
+  ``b = ks (1 - f0)``: any ``(a, b)`` with ``a, b >= 0`` and ``a + b <= 1`` is one
+  ``(ks, f0)``. Near normal incidence (``w`` ~ 0) only the product ``ks f0`` shows; the
+  two separate through the Fresnel rise toward grazing ``cos_d``, where ``F -> 1`` and
+  the lobe tends to ``ks`` alone. So the data must contain cells along that rise
+  (``theta_d`` from ~40 degrees, where ``w`` reaches 1e-3, to grazing); with fewer of
+  them, or noisier ones, the standard errors of ``ks`` and ``f0`` widen together.
+* Affine parameters (solved by linear least squares for each start of a fit): ``kd``
+  and ``ks``; with ``specular_weight=False``, ``kd`` and ``f0``.
 * ``diffuse=False`` removes ``kd`` and the Lambert term.
 
 The ``chi+`` factors of the paper are 1 for every reflection pair above the horizon.
@@ -23,6 +38,7 @@ uncoupled; single scattering loses energy at high roughness). Reciprocal.
 
 from __future__ import annotations
 
+import dataclasses
 from typing import ClassVar, Literal, final
 
 import equinox as eqx
@@ -43,6 +59,10 @@ F0 = Parameter(
     "Fresnel reflectance at normal incidence, RGB",
     linear=True,
 )
+# With ks, f0 multiplies ks: the model is affine in each alone, not in both, so only
+# ks is solved linearly.
+F0_WEIGHTED = dataclasses.replace(F0, linear=False)
+KS = Parameter("ks", (3,), (0.0, 1.0), 0.9, "logit", "specular weight rho_s, RGB", linear=True)
 ALPHA = Parameter("alpha", (), (1e-4, 2.0), 0.2, "log", "roughness alpha, unitless")
 ALPHA_X = Parameter("alpha_x", (), (1e-4, 2.0), 0.2, "log", "roughness along the tangent x")
 ALPHA_Y = Parameter("alpha_y", (), (1e-4, 2.0), 0.2, "log", "roughness along the bitangent y")
@@ -50,7 +70,8 @@ ALPHA_Y = Parameter("alpha_y", (), (1e-4, 2.0), 0.2, "log", "roughness along the
 
 @final
 class Walter(AbstractModel):
-    """Microfacet BRDF (GGX by default) with Smith masking, Schlick Fresnel and Lambert."""
+    """Microfacet BRDF (GGX by default) with Smith masking, Schlick Fresnel, a specular
+    weight and Lambert."""
 
     distribution: Literal["ggx", "beckmann"] = eqx.field(static=True, default="ggx")
     masking: Literal["uncorrelated", "height_correlated"] = eqx.field(
@@ -59,6 +80,7 @@ class Walter(AbstractModel):
     smith: Literal["exact", "rational"] = eqx.field(static=True, default="exact")
     anisotropic: bool = eqx.field(static=True, default=False)
     diffuse: bool = eqx.field(static=True, default=True)
+    specular_weight: bool = eqx.field(static=True, default=True)
 
     name: ClassVar[str] = "walter"
     reference: ClassVar[str] = "Walter, Marschner, Li, Torrance 2007, EGSR"
@@ -79,7 +101,8 @@ class Walter(AbstractModel):
     @property
     def parameters(self) -> tuple[Parameter, ...]:
         rough = (ALPHA_X, ALPHA_Y) if self.anisotropic else (ALPHA,)
-        return ((KD,) if self.diffuse else ()) + (F0,) + rough
+        spec = (KS, F0_WEIGHTED) if self.specular_weight else (F0,)
+        return ((KD,) if self.diffuse else ()) + spec + rough
 
     def roughness(self, params: Params) -> tuple[jax.Array, jax.Array]:
         """(alpha_x, alpha_y) for either roughness parametrisation."""
@@ -111,6 +134,8 @@ class Walter(AbstractModel):
             height_correlated=self.masking == "height_correlated",
         )
         f = _terms.schlick_fresnel(params["f0"], g.cos_d)
+        if self.specular_weight:
+            f = params["ks"][None, :] * f
         spec = f * (d * gg / (4.0 * g.cos_i * g.cos_o))[:, None]
         if self.diffuse:
             spec = spec + _terms.lambert(params["kd"])

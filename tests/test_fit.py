@@ -15,7 +15,7 @@ from brdffit.metrics import get_metric, prepare
 from brdffit.objective import Objective
 from tests.cases import CASES
 
-TRUTH = {"kd": [0.1, 0.2, 0.3], "f0": [0.9, 0.6, 0.3], "alpha": 0.15}
+TRUTH = {"kd": [0.1, 0.2, 0.3], "ks": [0.8, 0.7, 0.9], "f0": [0.9, 0.6, 0.3], "alpha": 0.15}
 GRID = (5, 5, 5)  # 11,664 MERL bin centres: the MERL grid at a fifth of its resolution
 
 
@@ -53,7 +53,7 @@ def test_noisy_fit_within_three_standard_errors(walter):
 def test_frozen_parameters_leave_the_fit(walter):
     data = synthesize(walter, TRUTH, stride=GRID, noise_mult=0.02, seed=2)
     r = fit(walter, data, "low_e2", freeze={"alpha": 0.15}, n_restarts=0)
-    assert r.converged and r.frozen == ("alpha",) and r.n_free == 6
+    assert r.converged and r.frozen == ("alpha",) and r.n_free == 9
     assert float(r.params["alpha"]) == 0.15 and float(r.stderr["alpha"]) == 0.0
     assert "alpha" not in r.labels and "(frozen)" in r.report()
     r2 = fit(walter, data, "low_e2", freeze=["f0"], init={"f0": [0.9, 0.6, 0.3]}, n_restarts=0)
@@ -132,13 +132,14 @@ def test_robust_loss_shrugs_off_outliers_the_plain_fit_does_not(walter, robust):
     data = _with_outliers(clean, 0.01, 100.0, seed=5)
     plain = fit(walter, data, "low_e2", n_restarts=0)
     rob = fit(walter, data, "low_e2", n_restarts=0, robust=robust)
+    ref = fit(walter, clean, "low_e2", n_restarts=0)  # what the data say without outliers
     assert rob.converged and rob.robust == robust and rob.robust_scale > 0
 
-    def worst(r):  # largest relative error over every parameter scalar
-        return max(np.max(np.abs(r.params[k] / np.asarray(v) - 1)) for k, v in TRUTH.items())
+    def worst(r):  # largest distance to the clean fit, in the robust fit's standard errors
+        return max(np.max(np.abs(r.params[k] - ref.params[k]) / rob.stderr[k]) for k in TRUTH)
 
-    print(robust, "largest relative error: plain", worst(plain), "robust", worst(rob))
-    assert worst(rob) < 0.01 and worst(plain) > 5 * worst(rob)
+    print(robust, "largest |fit - clean fit| / stderr: plain", worst(plain), "robust", worst(rob))
+    assert worst(rob) < 2.0 and worst(plain) > 10.0
     assert f"{robust} loss" in rob.report()
     assert FitResult.from_dict(json.loads(rob.to_json())).robust_scale == rob.robust_scale
     with pytest.raises(ParameterError, match="robust"):

@@ -17,7 +17,7 @@ from brdffit import lm, metrics, models, synthesize
 from brdffit.measurements import Measurements
 from brdffit.objective import Objective, plain_residuals
 
-TRUTH = {"kd": [0.1, 0.2, 0.3], "f0": [0.9, 0.6, 0.3], "alpha": 0.15}
+TRUTH = {"kd": [0.1, 0.2, 0.3], "ks": [0.8, 0.7, 0.9], "f0": [0.9, 0.6, 0.3], "alpha": 0.15}
 
 
 def _solve(obj: Objective, z0, prep, **tol):

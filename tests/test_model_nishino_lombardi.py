@@ -59,7 +59,8 @@ def test_small_k_is_normalised_blinn():
 
 def test_matches_numpy_transcription():
     model = models.get("nishino_lombardi")
-    p = {"kd": np.array([0.3, 0.2, 0.1]), "f0": np.array([0.9, 0.6, 0.04]), "k": 3.0, "m": 60.0}
+    p = {"kd": np.array([0.3, 0.2, 0.1]), "ks": np.array([0.7, 1.0, 0.5])}
+    p |= {"f0": np.array([0.9, 0.6, 0.04]), "k": 3.0, "m": 60.0}
     wi = spherical_to_vector(
         np.array([0.3, 1.0, 0.0, 1.5, 0.7, 1.3]), np.array([0.2, 2, 0, 0.1, -1, 1])
     )
@@ -71,7 +72,7 @@ def test_matches_numpy_transcription():
     d = closed_form_c(3.0, 60.0) * (1 - np.exp(-3.0 * ch**60))
     g = np.minimum(1, np.minimum(2 * ch * co / cd, 2 * ch * ci / cd))
     fres = p["f0"][None] + (1 - p["f0"][None]) * ((1 - cd) ** 5)[:, None]
-    ref = p["kd"][None] / np.pi + fres * (d * g / (4 * ci * co))[:, None]
+    ref = p["kd"][None] / np.pi + p["ks"][None] * fres * (d * g / (4 * ci * co))[:, None]
     assert np.any(g < 1)  # the set reaches the masking branch
     # float64; C from the 40-digit closed form against the model's rule (< 4e-12): 1e-10.
     np.testing.assert_allclose(np.asarray(model.eval(p, wi, wo)), ref, rtol=1e-10)

@@ -168,7 +168,7 @@ def test_the_benchmark_script_exits_2_naming_the_bad_input(tmp_path):
 def _scored(regime: str, ref_alpha: float) -> dict:
     """A Walter case scored from hand-made fits: the reference converged at alpha
     ``ref_alpha`` to an objective 1e-3 above the one start's (alpha 0.15)."""
-    point = {"kd": [0.1, 0.2, 0.3], "f0": [0.9, 0.6, 0.3]}
+    point = {"kd": [0.1, 0.2, 0.3], "ks": [0.8, 0.7, 0.6], "f0": [0.9, 0.6, 0.3]}
 
     def rec(alpha: float, j: float) -> dict:
         return {"status": "CONVERGED", "finite": True, "objective": j,
@@ -205,7 +205,7 @@ def test_the_truths_basin_is_the_plain_descent_from_the_truth_not_the_screened_r
     # as the worse ones. The plain descent from the truth decides instead.
     case = _scored("outliers", 0.15)
     assert case["identifiable"]  # no local fit stored: the reference decides
-    point = {"kd": [0.1, 0.2, 0.3], "f0": [0.9, 0.6, 0.3], "alpha": 0.6}
+    point = {"kd": [0.1, 0.2, 0.3], "ks": [0.8, 0.7, 0.6], "f0": [0.9, 0.6, 0.3], "alpha": 0.6}
     local = {"status": "CONVERGED", "finite": True, "objective": 1.001, "params": point,
              "n_steps": 5, "wall_time": 0.1}  # fmt: skip
     case = stress.score({**_scored("outliers", 0.15), "local": local})
@@ -223,7 +223,7 @@ def test_fits_that_all_end_above_the_truths_own_objective_are_not_recovered():
     # 29% above the robust objective of the truth, and each counted as recovered against
     # the others. The truth's own objective bounds the best, so such fits fail, and a
     # reference above it does not make the case unidentifiable: it did not descend.
-    truth = {"kd": [0.1, 0.2, 0.3], "f0": [0.9, 0.6, 0.3], "alpha": 0.3}
+    truth = {"kd": [0.1, 0.2, 0.3], "ks": [0.8, 0.7, 0.6], "f0": [0.9, 0.6, 0.3], "alpha": 0.3}
     case = stress.score({**_scored("outliers", 0.6), "truth": truth, "truth_objective": 0.9})
     assert case["best_objective"] == 0.9
     assert case["recovery"] == 0.0 and case["failures"] == {"wrong minimum": 1}

@@ -8,7 +8,7 @@ import pytest
 from brdffit import models, synthesize
 from brdffit.errors import ParameterError
 
-TRUTH = {"kd": [0.1, 0.2, 0.3], "f0": [0.9, 0.6, 0.3], "alpha": 0.15}
+TRUTH = {"kd": [0.1, 0.2, 0.3], "ks": [0.8, 0.7, 0.9], "f0": [0.9, 0.6, 0.3], "alpha": 0.15}
 
 
 def test_noise_free_values_equal_model_on_the_grid():

@@ -119,8 +119,8 @@ class Roles:
     also set, and the diffuse scale, which the base colour also sets (a ridge: the fits
     reached the minimum's cost along it and crawled); ``narrow`` parameters set when the
     lobe exponent exceeds 1e3 (Lafortune's ``cxy = -1``: with ``|cxy| > 1`` the lobe
-    grows as ``|cxy|^n`` towards grazing, 1e1000 at ``n = 1e4``, far past the model's
-    ``e^60`` cap; no material does that, and the capped model is flat in ``n``);
+    grows as ``|cxy|^n`` towards grazing, 1e1000 at ``n = 1e4``, far past float64 (the
+    model returns ``+inf`` there); no material does that);
     ``alpha_floor`` the narrowest lobe (``alpha``) the model evaluates, and ``narrow``
     then applies at near-mirror too: Disney clamps each axis at ``alpha = 0.001``, so its
     near-mirror truth is isotropic with ``alpha = 1.1e-3``. At ``alpha = 1e-3`` with
@@ -244,7 +244,7 @@ ROLES: dict[str, Roles] = {
         "kd",
     ),
     "nishino_lombardi": Roles(
-        {"kd": [0.3, 0.2, 0.1], "f0": [0.9, 0.7, 0.5], "k": 3.0, "m": 200.0},
+        {"kd": [0.3, 0.2, 0.1], "ks": [0.8, 0.7, 0.6], "f0": [0.9, 0.7, 0.5], "k": 3.0, "m": 200.0},
         "m",
         "exponent",
         "kd",
@@ -254,7 +254,10 @@ ROLES: dict[str, Roles] = {
         {"kd": [0.2, 0.3, 0.4], "ks": [0.3, 0.2, 0.1], "n": 80.0}, "n", "exponent", "kd"
     ),
     "walter": Roles(
-        {"kd": [0.1, 0.2, 0.3], "f0": [0.9, 0.6, 0.3], "alpha": 0.15}, "alpha", "width", "kd"
+        {"kd": [0.1, 0.2, 0.3], "ks": [0.8, 0.7, 0.6], "f0": [0.9, 0.6, 0.3], "alpha": 0.15},
+        "alpha",
+        "width",
+        "kd",
     ),
     "ward": Roles(
         {"kd": [0.2, 0.3, 0.4], "ks": [0.1, 0.1, 0.1], "alpha": 0.15}, "alpha", "width", "kd"
