@@ -19,6 +19,8 @@ with the denominator replaced by 1 where it is below 1e-30 (the base ``n . h`` i
 any finite exponent gives the right value). ``(n . h)^e`` is ``exp(e log cos_h)`` with
 ``log cos_h`` from the tangential components near the normal (exponents reach 1e5).
 ``1/((wi . h) max(cos_i, cos_o))`` grows to ~1e12 at grazing mirror pairs but stays finite.
+The diffuse factors ``1 - (1 - cos/2)^5 ~ 5 cos/2`` cancel at grazing angles when written as
+printed (relative error ~1e-16/cos: 1e-6 at cos 1e-10): they are ``-expm1(5 log1p(-cos/2))``.
 Reciprocal (``max`` and ``wi . h = wo . h`` are symmetric). Energy conserving, as the paper
 claims: checked by quadrature over ``Rs``, ``n`` and incidence with ``Rd = 1``
 (``tests/test_model_ashikhmin_shirley.py``); the largest albedo, 0.99996, is at ``Rs = 1``,
@@ -60,9 +62,14 @@ def half_vector_pdf(h: jax.Array, nu: jax.Array, nv: jax.Array, e: jax.Array) ->
     return jnp.sqrt((nu + 1.0) * (nv + 1.0)) * (0.5 * INV_PI) * jnp.exp(e * log_cos_theta_h(h))
 
 
+def one_minus_fifth_power(x: jax.Array) -> jax.Array:
+    """``1 - (1 - x)^5`` for ``x`` in (0, 1/2], as ``-expm1(5 log1p(-x))``: no cancellation."""
+    return -jnp.expm1(5.0 * jnp.log1p(-x))
+
+
 def coupled_diffuse(rd: jax.Array, rs: jax.Array, g: ShadingGeometry) -> jax.Array:
     """``28 Rd/(23 pi) (1 - Rs)(1 - (1 - cos_i/2)^5)(1 - (1 - cos_o/2)^5)`` (1/sr), (N, 3)."""
-    shape = (1.0 - (1.0 - 0.5 * g.cos_i) ** 5) * (1.0 - (1.0 - 0.5 * g.cos_o) ** 5)
+    shape = one_minus_fifth_power(0.5 * g.cos_i) * one_minus_fifth_power(0.5 * g.cos_o)
     return (28.0 / 23.0 * INV_PI) * (rd * (1.0 - rs))[None, :] * shape[:, None]
 
 

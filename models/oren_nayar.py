@@ -28,8 +28,14 @@ Guards: ``cos_phi`` comes from the tangential components, ``(wi_xy . wo_xy) /
 uses it). ``sin(alpha) = max(sin_i, sin_o)``, ``tan(beta) = min(sin_i, sin_o) /
 max(cos_i, cos_o)``, and ``tan((alpha + beta)/2)`` is written from sines and cosines
 without cancellation (so it stays positive, ~2 / (cos_i + cos_o), at grazing angles in
-float32, where ``tan`` of a rounded angle near pi/2 can change sign). Not energy
-conserving: the qualitative albedo reaches 1.015 rho at grazing incidence (sigma ~ 0.2).
+float32, where ``tan`` of a rounded angle near pi/2 can change sign). Three differences
+cancel near grazing or near the plane of incidence and are rewritten (measured against a
+40-digit reference: 1e-6 relative error at cos 1e-10 before): ``sin(alpha) - (2 beta/pi)^3``
+as ``x (3 - 3x + x^2) - cos_a^2/(1 + sin_a)`` with ``x = 1 - 2 beta/pi = (2/pi)
+atan2(cos_b, sin_b)``; ``1 - |cos_phi|`` as ``sin_phi^2 / (1 + |cos_phi|)`` with ``sin_phi``
+from the cross product; ``1 - cos_phi (2 beta/pi)^2`` as ``(1 - cos_phi) + cos_phi x (2 - x)``.
+Not energy conserving: the qualitative albedo reaches 1.015 rho at grazing incidence
+(sigma ~ 0.2).
 """
 
 from __future__ import annotations
@@ -64,6 +70,14 @@ def cos_phi_diff(wi: jax.Array, wo: jax.Array, s_i: jax.Array, s_o: jax.Array) -
     ok = prod > 0.0
     dot = wi[:, 0] * wo[:, 0] + wi[:, 1] * wo[:, 1]
     return jnp.where(ok, jnp.clip(dot / jnp.where(ok, prod, 1.0), -1.0, 1.0), 0.0)
+
+
+def sin_phi_diff(wi: jax.Array, wo: jax.Array, s_i: jax.Array, s_o: jax.Array) -> jax.Array:
+    """``sin(phi_i - phi_o)`` from the tangential components, 0 where undefined, (N,)."""
+    prod = s_i * s_o
+    ok = prod > 0.0
+    cross = wi[:, 0] * wo[:, 1] - wi[:, 1] * wo[:, 0]
+    return jnp.where(ok, jnp.clip(cross / jnp.where(ok, prod, 1.0), -1.0, 1.0), 0.0)
 
 
 def tan_half_sum(sa: jax.Array, ca: jax.Array, sb: jax.Array, cb: jax.Array) -> jax.Array:
@@ -107,9 +121,17 @@ class OrenNayar(AbstractModel):
             shape = c1 + b * jnp.maximum(cos_phi, 0.0) * sin_a * tan_b
             return rho[None, :] * (INV_PI * shape)[:, None]
         alpha, beta = jnp.arctan2(sin_a, cos_a), jnp.arctan2(sin_b, cos_b)
-        c2 = jnp.where(cos_phi >= 0.0, b * sin_a, b * (sin_a - (TWO_OVER_PI * beta) ** 3))
+        x = TWO_OVER_PI * jnp.arctan2(cos_b, sin_b)  # 1 - 2 beta / pi, exact near grazing
+        # sin(alpha) - (2 beta/pi)^3 = (1 - (1 - x)^3) - (1 - sin(alpha)), cancellation-free
+        c2_back = x * (3.0 - 3.0 * x + x**2) - cos_a**2 / (1.0 + sin_a)
+        c2 = jnp.where(cos_phi >= 0.0, b * sin_a, b * c2_back)
         c3 = 0.125 * s2 / (s2 + 0.09) * (4.0 * INV_PI**2 * alpha * beta) ** 2
         tan_ab = tan_half_sum(sin_a, cos_a, sin_b, cos_b)
-        l1 = c1 + cos_phi * c2 * tan_b + (1.0 - jnp.abs(cos_phi)) * c3 * tan_ab
-        l2 = 0.17 * s2 / (s2 + 0.13) * (1.0 - cos_phi * (TWO_OVER_PI * beta) ** 2)
+        sin2_phi = sin_phi_diff(g.wi, g.wo, s_i, s_o) ** 2
+        ok = s_i * s_o > 0.0  # else cos_phi = 0: 1 - |cos_phi| = 1
+        one_minus_abs = jnp.where(ok, sin2_phi / (1.0 + jnp.abs(cos_phi)), 1.0)
+        one_minus_cos = jnp.where(cos_phi >= 0.0, one_minus_abs, 1.0 - cos_phi)
+        l1 = c1 + cos_phi * c2 * tan_b + one_minus_abs * c3 * tan_ab
+        # 1 - cos_phi (1 - x)^2 = (1 - cos_phi) + cos_phi x (2 - x)
+        l2 = 0.17 * s2 / (s2 + 0.13) * (one_minus_cos + cos_phi * x * (2.0 - x))
         return INV_PI * (rho[None, :] * l1[:, None] + rho[None, :] ** 2 * l2[:, None])
