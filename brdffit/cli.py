@@ -98,6 +98,7 @@ def cmd_fit(args) -> None:
         seed=args.seed,
         robust=args.robust,
         robust_scale=args.robust_scale,
+        errors=args.errors,
         throw=False,
     )
     print(r.report())
@@ -260,6 +261,13 @@ def build_parser() -> argparse.ArgumentParser:
         "--robust", choices=["huber", "cauchy"], help="robust loss on the residuals (outliers)"
     )
     s.add_argument("--robust-scale", type=float, help="its scale, residual units (default: MAD)")
+    s.add_argument(
+        "--errors",
+        default="sandwich",
+        choices=["sandwich", "classic", "blocks"],
+        help="standard errors; blocks: for measured data, admits model error shared by "
+        "neighbouring cells",
+    )
     s.add_argument("--json", metavar="OUT", help="write the result as JSON")
     s.set_defaults(func=cmd_fit)
     s = sub.add_parser("sample", help="emcee posterior of one model, started at the LM fit")

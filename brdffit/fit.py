@@ -39,7 +39,7 @@ from brdffit.errors import FitError, ParameterError
 from brdffit.measurements import Measurements
 from brdffit.objective import Objective, freeze_map, start_params
 from brdffit.result import FitResult, Status
-from brdffit.uncertainty import Outcome, assemble
+from brdffit.uncertainty import ERRORS, Outcome, assemble
 
 Freeze = Mapping[str, object] | Sequence[str] | None
 
@@ -97,7 +97,8 @@ def fit(
       few become starts. 0 turns the screen off.
     - ``max_steps``: tried LM steps per descent. ``ftol``, ``xtol``, ``gtol``: relative
       stopping tolerances (:mod:`brdffit.lm`).
-    - ``errors``: ``"sandwich"`` or ``"classic"`` (:mod:`brdffit.uncertainty`).
+    - ``errors``: ``"sandwich"``, ``"classic"`` or ``"blocks"`` (model error shared by
+      neighbouring cells, for measured data; :mod:`brdffit.uncertainty`).
     - ``robust``: ``None``, ``"huber"`` or ``"cauchy"``: a robust loss on the metric's
       residuals against outliers; ``robust_scale`` (residual units) defaults to the
       tuning constant (1.345 Huber, 2.385 Cauchy) times 1.4826 MAD of the plain
@@ -181,8 +182,8 @@ class _Settings:
     throw: bool = True
 
     def __post_init__(self) -> None:
-        if self.errors not in ("sandwich", "classic"):
-            raise ParameterError(f"errors={self.errors!r}: use 'sandwich' or 'classic'")
+        if self.errors not in ERRORS:
+            raise ParameterError(f"errors={self.errors!r}: use one of {', '.join(ERRORS)}")
         if self.robust is not None and self.robust not in metrics_mod.ROBUST_TUNING:
             raise ParameterError(f"robust={self.robust!r}: use None, 'huber' or 'cauchy'")
         rs = self.robust_scale

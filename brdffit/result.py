@@ -35,7 +35,7 @@ class FitResult:
     Fields: ``model`` (registry name), ``options`` (static options), ``metric``,
     ``params`` / ``init_params`` (name -> array), ``stderr`` (name -> array, frozen
     parameters 0), ``covariance``, ``correlation``, ``labels``, ``frozen`` (names),
-    ``errors_method`` ("sandwich" or "classic"), ``errors_reason``, ``loss`` (the
+    ``errors_method`` ("sandwich", "classic" or "blocks"), ``errors_reason``, ``loss`` (the
     metric's value), ``losses`` (every metric, same samples), ``cost`` (``0.5 sum r^2``
     LM minimised), ``n_samples``, ``n_data`` (residuals = 3 x samples), ``n_free``,
     ``aic``, ``bic``, ``condition_number`` (of the column-scaled ``J^T J``),
@@ -46,7 +46,8 @@ class FitResult:
     sample count, 0 when the starts ran on all samples, and its steps summed over
     starts, the descents under the other metric for the extra start included;
     ``n_steps`` counts the winner's steps on all samples), ``robust`` /
-    ``robust_scale`` (the robust loss and its scale in residual units, or None).
+    ``robust_scale`` (the robust loss and its scale in residual units, or None),
+    ``error_blocks`` (the blocks of ``errors="blocks"``, else 0).
     """
 
     model: str
@@ -83,6 +84,7 @@ class FitResult:
     coarse_steps: int = 0
     robust: str | None = None
     robust_scale: float | None = None
+    error_blocks: int = 0
 
     @property
     def converged(self) -> bool:
@@ -129,6 +131,7 @@ class FitResult:
             "coarse_steps": self.coarse_steps,
             "robust": self.robust,
             "robust_scale": self.robust_scale,
+            "error_blocks": self.error_blocks,
         }
 
     def to_json(self, indent: int | None = 2) -> str:
@@ -180,6 +183,7 @@ class FitResult:
             coarse_steps=int(d.get("coarse_steps", 0)),
             robust=d.get("robust"),
             robust_scale=d.get("robust_scale"),
+            error_blocks=int(d.get("error_blocks", 0)),
         )
 
     def _coarse_text(self) -> str:
@@ -189,6 +193,8 @@ class FitResult:
 
     def report(self, correl_min: float = 0.3) -> str:
         """Human-readable report in the spirit of lmfit's ``fit_report``."""
+        from brdffit.uncertainty import describe  # uncertainty builds FitResults
+
         opts = ", ".join(f"{k}={v!r}" for k, v in self.options.items())
         cut = "no angle cut" if self.cut_deg is None else f"theta_i, theta_o < {self.cut_deg:g} deg"
         others = ", ".join(f"{k} {v:.6g}" for k, v in self.losses.items() if k != self.metric)
@@ -196,7 +202,7 @@ class FitResult:
             f"[[Fit]] {self.model}({opts}) on {self.source}",
             f"    metric           {self.metric} = {self.loss:.6g}   ({cut})",
             f"    other metrics    {others}",
-            f"    noise model      residuals independent; errors by {self.errors_method}"
+            f"    noise model      {describe(self.errors_method, self.error_blocks)}"
             + (f"; {self.robust} loss, scale {self.robust_scale:.3g}" if self.robust else ""),
             f"    status           {self.status.value}",
             f"    steps            {self.n_steps} "
