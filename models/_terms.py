@@ -1,4 +1,5 @@
-"""Terms shared by several models: diffuse lobes, microfacet distributions, masking, Fresnel.
+"""Terms shared by several models: diffuse lobes, microfacet distributions, masking, Fresnel,
+and the parameter rows of the seed table's weighted Fresnel ``rho_s F``.
 
 Each is a small pure JAX function of cosines or half-vector components from
 :class:`~brdffit.geometry.ShadingGeometry`; inputs below the horizon are already
@@ -8,10 +9,39 @@ Roughness ``alpha`` follows Walter et al. 2007 (GGX ``alpha_g``, Beckmann ``alph
 
 from __future__ import annotations
 
+import dataclasses
+
 import jax
 import jax.numpy as jnp
 
+from brdffit.parameters import Parameter, Params
+
 INV_PI = 0.3183098861837907
+
+F0 = Parameter(
+    "f0",
+    (3,),
+    (0.0, 1.0),
+    0.04,
+    "logit",
+    "Fresnel reflectance at normal incidence, RGB",
+    linear=True,
+)
+# With ks, f0 multiplies ks: the model is affine in each alone, not in both, so only
+# ks is solved linearly.
+F0_WEIGHTED = dataclasses.replace(F0, linear=False)
+KS = Parameter("ks", (3,), (0.0, 1.0), 0.9, "logit", "specular weight rho_s, RGB", linear=True)
+
+
+def fresnel_rows(weighted: bool) -> tuple[Parameter, ...]:
+    """Table rows of the specular colour: ``(ks, f0)`` with the weight, else ``(f0,)``."""
+    return (KS, F0_WEIGHTED) if weighted else (F0,)
+
+
+def weighted_schlick(params: Params, cos_d: jax.Array, weighted: bool) -> jax.Array:
+    """``ks F`` (or ``F``) with Schlick's ``F`` of RGB ``f0`` (:func:`schlick_fresnel`), (N, 3)."""
+    f = schlick_fresnel(params["f0"], cos_d)
+    return params["ks"][None, :] * f if weighted else f
 
 
 def lambert(albedo: jax.Array) -> jax.Array:

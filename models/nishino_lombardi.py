@@ -38,31 +38,26 @@ Singularities: ``1/(cos_i cos_o)`` is cancelled to first order by ``G``;
 
 from __future__ import annotations
 
-import dataclasses
 from typing import ClassVar, final
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from brdffit.models._terms import INV_PI, lambert, log_cos_theta_h, schlick_fresnel, v_cavity_g
+from brdffit.models._terms import (
+    INV_PI,
+    fresnel_rows,
+    lambert,
+    log_cos_theta_h,
+    v_cavity_g,
+    weighted_schlick,
+)
 
 from brdffit.abstract_model import AbstractModel
 from brdffit.geometry import ShadingGeometry
 from brdffit.parameters import Parameter, Params
 
 KD = Parameter("kd", (3,), (0.0, 1.0), 0.3, "logit", "diffuse albedo, RGB", linear=True)
-F0 = Parameter(
-    "f0",
-    (3,),
-    (0.0, 1.0),
-    0.04,
-    "logit",
-    "Fresnel reflectance at normal incidence, RGB",
-    linear=True,
-)
-F0_WEIGHTED = dataclasses.replace(F0, linear=False)  # multiplies ks: not jointly affine
-KS = Parameter("ks", (3,), (0.0, 1.0), 0.9, "logit", "specular weight rho_s, RGB", linear=True)
 LOBE = (
     Parameter("k", (), (1e-3, 1e3), 1.0, "log", "hemi-EPD concentration -kappa, unitless"),
     Parameter("m", (), (0.1, 1e5), 100.0, "log", "hemi-EPD exponent gamma, unitless"),
@@ -102,13 +97,10 @@ class NishinoLombardi(AbstractModel):
 
     @property
     def parameters(self) -> tuple[Parameter, ...]:
-        spec = (KS, F0_WEIGHTED) if self.specular_weight else (F0,)
-        return (KD, *spec, *LOBE)
+        return (KD, *fresnel_rows(self.specular_weight), *LOBE)
 
     def core(self, params: Params, g: ShadingGeometry) -> jax.Array:
         d = hemi_epd(g.h, params["k"], params["m"])
         gg = v_cavity_g(g.cos_h, g.cos_i, g.cos_o, g.cos_d)
-        f = schlick_fresnel(params["f0"], g.cos_d)
-        if self.specular_weight:
-            f = params["ks"][None, :] * f
+        f = weighted_schlick(params, g.cos_d, self.specular_weight)
         return f * (d * gg / (4.0 * g.cos_i * g.cos_o))[:, None] + lambert(params["kd"])

@@ -38,7 +38,6 @@ uncoupled; single scattering loses energy at high roughness). Reciprocal.
 
 from __future__ import annotations
 
-import dataclasses
 from typing import ClassVar, Literal, final
 
 import equinox as eqx
@@ -50,19 +49,6 @@ from brdffit.geometry import ShadingGeometry
 from brdffit.parameters import Parameter, Params
 
 KD = Parameter("kd", (3,), (0.0, 1.0), 0.3, "logit", "diffuse albedo, RGB", linear=True)
-F0 = Parameter(
-    "f0",
-    (3,),
-    (0.0, 1.0),
-    0.04,
-    "logit",
-    "Fresnel reflectance at normal incidence, RGB",
-    linear=True,
-)
-# With ks, f0 multiplies ks: the model is affine in each alone, not in both, so only
-# ks is solved linearly.
-F0_WEIGHTED = dataclasses.replace(F0, linear=False)
-KS = Parameter("ks", (3,), (0.0, 1.0), 0.9, "logit", "specular weight rho_s, RGB", linear=True)
 ALPHA = Parameter("alpha", (), (1e-4, 2.0), 0.2, "log", "roughness alpha, unitless")
 ALPHA_X = Parameter("alpha_x", (), (1e-4, 2.0), 0.2, "log", "roughness along the tangent x")
 ALPHA_Y = Parameter("alpha_y", (), (1e-4, 2.0), 0.2, "log", "roughness along the bitangent y")
@@ -101,7 +87,7 @@ class Walter(AbstractModel):
     @property
     def parameters(self) -> tuple[Parameter, ...]:
         rough = (ALPHA_X, ALPHA_Y) if self.anisotropic else (ALPHA,)
-        spec = (KS, F0_WEIGHTED) if self.specular_weight else (F0,)
+        spec = _terms.fresnel_rows(self.specular_weight)
         return ((KD,) if self.diffuse else ()) + spec + rough
 
     def roughness(self, params: Params) -> tuple[jax.Array, jax.Array]:
@@ -133,9 +119,7 @@ class Walter(AbstractModel):
             self.lambda_(params, g.wo),
             height_correlated=self.masking == "height_correlated",
         )
-        f = _terms.schlick_fresnel(params["f0"], g.cos_d)
-        if self.specular_weight:
-            f = params["ks"][None, :] * f
+        f = _terms.weighted_schlick(params, g.cos_d, self.specular_weight)
         spec = f * (d * gg / (4.0 * g.cos_i * g.cos_o))[:, None]
         if self.diffuse:
             spec = spec + _terms.lambert(params["kd"])
