@@ -2,8 +2,8 @@
 
 Public API (everything else may change): :func:`read_merl`, :func:`write_merl`,
 :func:`synthesize`, :func:`fit`, :func:`fit_many`, :func:`sample`, :func:`rank`,
-:class:`Measurements`, :class:`FitResult`, :class:`Posterior`, :mod:`brdffit.models` and
-the error types.
+:func:`simplify`, :class:`Measurements`, :class:`FitResult`, :class:`Posterior`,
+:class:`Reduction`, :mod:`brdffit.models` and the error types.
 
 Importing brdffit turns on JAX's 64-bit mode: fits run in float64 by default because
 measured BRDF values span 1e-4 to 1e4. float32 evaluation still works by passing
@@ -52,6 +52,7 @@ from brdffit.merl import read_merl, write_merl  # noqa: E402
 from brdffit.rank import Ranking, rank  # noqa: E402
 from brdffit.result import FitResult, Status  # noqa: E402
 from brdffit.sample import Posterior, sample  # noqa: E402
+from brdffit.simplify import Reduction, simplify  # noqa: E402
 from brdffit.synthetic import synthesize  # noqa: E402
 
 __all__ = [
@@ -59,12 +60,14 @@ __all__ = [
     "FitResult",
     "Posterior",
     "Ranking",
+    "Reduction",
     "Status",
     "fit",
     "fit_many",
     "rank",
     "read_merl",
     "sample",
+    "simplify",
     "synthesize",
     "write_merl",
     "BrdffitError",

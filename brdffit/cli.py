@@ -205,6 +205,28 @@ def cmd_demo(args) -> None:
     run_demo(args.out, progress=not args.no_progress)
 
 
+def cmd_simplify(args) -> None:
+    """The reduction path table and the chosen label (:func:`brdffit.simplify.simplify`)."""
+    from brdffit.simplify import simplify
+
+    r = simplify(
+        _model(args.model, args.option),
+        _load(args),
+        args.metric,
+        criterion=args.criterion,
+        folds=args.folds,
+        n_se=args.n_se,
+        cut_deg=args.cut,
+        seed=args.seed,
+        freeze=_freeze(args.freeze),
+        throw=False,
+    )
+    print(r.table(args.format))
+    print(r.chosen)
+    if args.json:
+        _write(args.json, r.to_json())
+
+
 def _stride_arg(sp: argparse.ArgumentParser) -> None:
     sp.add_argument(
         "--stride",
@@ -326,6 +348,22 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--out", default="demo-out", help="output folder")
     s.add_argument("--no-progress", action="store_true")
     s.set_defaults(func=cmd_demo)
+    s = sub.add_parser("simplify", help="leave out the features the data do not support")
+    data_args(s)
+    fit_args(s)
+    s.add_argument(
+        "--criterion",
+        default="cv",
+        choices=["cv", "bic"],
+        help="cv: held-out loss over blocks of cells, one-SE rule; bic: n = residuals",
+    )
+    s.add_argument("--folds", type=int, default=5, help="cross-validation folds")
+    s.add_argument(
+        "--n-se", type=float, default=1.0, help="cv: tolerance in standard errors (1: one-SE rule)"
+    )
+    s.add_argument("--format", default="text", choices=["text", "markdown"])
+    s.add_argument("--json", metavar="OUT", help="write the path and both fits as JSON")
+    s.set_defaults(func=cmd_simplify)
     return p
 
 

@@ -11,6 +11,11 @@ comma-separated list of them, and :func:`label` writes the canonical spec of a m
 name plus the options that differ from the defaults, in field order, so
 ``from_spec(label(m))`` rebuilds ``m``. Sweeps and rankings name models by their label.
 Values are ``true``/``false``, integers, floats or bare words (letters, digits, ``_.+-``).
+
+Every model also takes the option ``grey``: RGB parameters tied to one value for the
+three channels, named joined by ``+`` (``walter[diffuse=false,grey=ks+f0]``). It is
+not a field of the model class: :func:`get` wraps the model in
+:class:`brdffit.models._grey.Grey` and :func:`label` writes it last (see that module).
 """
 
 from __future__ import annotations
@@ -20,6 +25,8 @@ import importlib
 import pkgutil
 import re
 from collections.abc import Mapping
+
+from brdffit.models import _grey
 
 from brdffit.abstract_model import AbstractModel
 from brdffit.errors import ParameterError
@@ -53,13 +60,18 @@ def available() -> list[str]:
 def get(name: str, **options: object) -> AbstractModel:
     """Build the model ``name`` with static ``options`` (see each model's fields).
 
-    Raises :class:`~brdffit.errors.ParameterError` naming the unknown model or option
-    and listing what is accepted.
+    ``grey`` (names joined by ``+``, or a sequence) ties those RGB parameters across
+    channels (:func:`brdffit.models._grey.make_grey`). Raises
+    :class:`~brdffit.errors.ParameterError` naming the unknown model or option and
+    listing what is accepted.
     """
     if name not in _REGISTRY:
         raise ParameterError(f"unknown model {name!r}; available: {', '.join(_REGISTRY)}")
+    if _grey.OPTION in options:
+        grey = options.pop(_grey.OPTION)
+        return _grey.make_grey(get(name, **options), grey)
     cls = _REGISTRY[name]
-    accepted = [f.name for f in dataclasses.fields(cls)]
+    accepted = [f.name for f in dataclasses.fields(cls)] + [_grey.OPTION]
     bad = sorted(set(options) - set(accepted))
     if bad:
         raise ParameterError(
@@ -168,7 +180,10 @@ def _text(value: object) -> str:
 
 
 def changed_options(model: AbstractModel) -> dict[str, object]:
-    """The static options of ``model`` that differ from its class's defaults, in field order."""
+    """The static options of ``model`` that differ from its class's defaults, in field order
+    (then ``grey`` for a grey variant)."""
+    if isinstance(model, _grey.Grey):
+        return {**changed_options(model.base), _grey.OPTION: model.grey_text}
     return {
         f.name: getattr(model, f.name)
         for f in dataclasses.fields(model)

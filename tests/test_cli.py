@@ -147,3 +147,23 @@ def test_fit_command_works_for_every_model(capsys, merl_file, tmp_path, name):
     d = json.loads(js.read_text())
     assert d["model"] == name and set(d["params"]) == {p.name for p in models.get(name).parameters}
     assert np.isfinite(d["loss"])
+
+
+def test_simplify_prints_the_path_and_the_chosen_label(capsys, merl_file, tmp_path):
+    # the fixture's kd and f0 are coloured and its diffuse term is on: nothing goes
+    js, start = tmp_path / "simplify.json", "walter[specular_weight=false]"
+    code, out, err = _run(
+        capsys, "simplify", merl_file, "--model", start, "--criterion", "bic", "--json", js, *SMALL
+    )
+    assert code == 0, err
+    assert "Simplify walter[specular_weight=false]" in out and "BIC" in out
+    assert "grey f0" in out and "diffuse=false" in out
+    assert out.strip().splitlines()[-1] == start
+    d = json.loads(js.read_text())
+    assert d["chosen"] == start and d["path"][0]["decision"] == "chosen"
+    with pytest.raises(SystemExit) as exit_info:
+        raise SystemExit(
+            main(["simplify", str(merl_file), "--model", "walter", "--criterion", "aic"])
+        )
+    err = capsys.readouterr()[1]
+    assert exit_info.value.code == 2 and len(err.strip().splitlines()) == 1 and "aic" in err
