@@ -50,7 +50,6 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
-import re
 import time
 from dataclasses import dataclass
 
@@ -70,6 +69,7 @@ from brdffit.objective import Objective
 from brdffit.result import FitResult, nan_to_none
 from brdffit.tables import render
 from brdffit.uncertainty import block_index
+from brdffit.variants import renumber, rgb_names, scalar_count, start_rows
 
 CRITERIA = ("cv", "bic")
 
@@ -337,7 +337,7 @@ class _Search:
         """Every variant one move simpler: (model, start rows, change text)."""
         model = node.model
         base, grey = (model.base, model.names) if isinstance(model, Grey) else (model, ())
-        size = _scalars(model)
+        size = scalar_count(model)
         opts = base.options()
         for f in dataclasses.fields(base):
             v = getattr(base, f.name)
@@ -353,12 +353,12 @@ class _Search:
                 continue
             drops = range(1, v + 1) if not isinstance(v, bool) else (None,)
             child, rows = self._child(child_base, grey, node.rows, drops)
-            if _scalars(child) < size:
+            if scalar_count(child) < size:
                 yield child, rows, change
         for p in model.parameters:
             if p.shape == (3,) and p.name not in self.frozen:
                 child = make_grey(model, [p.name])
-                yield child, _map(child, node.rows, None), f"grey {p.name}"
+                yield child, start_rows(child, node.rows, None), f"grey {p.name}"
 
     def _child(self, child_base, grey, rows, drops) -> tuple[AbstractModel, dict]:
         """``child_base`` with the parent's ``grey`` names that it still has, and its start
@@ -366,9 +366,9 @@ class _Search:
         least (a grey lobe's name moves with the lobe)."""
         out = []
         for d in drops:
-            names = [_renumber(n, d) for n in grey]
-            child = make_grey(child_base, [n for n in names if n in _rgb(child_base)])
-            out.append((child, _map(child, rows, d)))
+            names = [renumber(n, d) for n in grey]
+            child = make_grey(child_base, [n for n in names if n in rgb_names(child_base)])
+            out.append((child, start_rows(child, rows, d)))
         if len(out) == 1:
             return out[0]
         costs = []
@@ -377,56 +377,6 @@ class _Search:
             z = obj.layout.solver_vector({k: v[0] for k, v in start.items()})
             costs.append(float(_cost(obj, jnp.asarray(z), self.prep)))
         return out[int(np.argmin(np.where(np.isfinite(costs), costs, np.inf)))]
-
-
-_INDEX = re.compile(r"^(.*)_(\d+)$")
-_AXIS = re.compile(r"_?(xy|x|y)(?=_|$)")
-
-
-def _axisless(name: str) -> str:
-    """``name`` without its axis letters: ``alpha_x``, ``alpha`` -> ``alpha``; ``mx_1`` ->
-    ``m_1``; ``cx_1``, ``cxy_1`` -> ``c_1``."""
-    return _AXIS.sub("", name)
-
-
-def _renumber(name: str, drop: int | None) -> str:
-    """The child's name of the parent's parameter ``name`` once lobe ``drop`` is removed
-    (``rho_3`` -> ``rho_2`` for ``drop`` 1 or 2; the dropped lobe's own names vanish)."""
-    hit = _INDEX.match(name)
-    if drop is None or not hit or int(hit[2]) < drop:
-        return name
-    return "" if int(hit[2]) == drop else f"{hit[1]}_{int(hit[2]) - 1}"
-
-
-def _map(child: AbstractModel, rows: dict[str, np.ndarray], drop: int | None) -> dict:
-    """Start rows of ``child`` from its parent's ``rows`` (module docstring); ``drop``:
-    the parent's lobe removed (later lobes move down by one)."""
-    out, r = {}, next(iter(rows.values())).shape[0]
-    back = {_renumber(k, drop): k for k in rows}
-    for p in child.parameters:
-        src = back.get(p.name, p.name if drop is None else "")
-        if src in rows:
-            v = rows[src]
-            v = v.mean(axis=-1) if p.shape == () and v.ndim == 2 else v
-        else:  # a new parameter: the mean of its per-axis namesakes (alpha_x, alpha_y)
-            same = [v for k, v in rows.items() if _axisless(k) == _axisless(p.name)]
-            same = [v for v in same if v.shape[1:] == p.shape]
-            if not same:
-                v = np.broadcast_to(np.asarray(p.default_array()), (r,) + p.shape)
-            elif p.solver_log:
-                v = np.exp(np.mean([np.log(np.maximum(s, 1e-300)) for s in same], axis=0))
-            else:
-                v = np.mean(same, axis=0)
-        out[p.name] = np.clip(v, *p.bounds)
-    return out
-
-
-def _scalars(model: AbstractModel) -> int:
-    return sum(p.size for p in model.parameters)
-
-
-def _rgb(model: AbstractModel) -> set[str]:
-    return {p.name for p in model.parameters if p.shape == (3,)}
 
 
 @eqx.filter_jit
