@@ -253,6 +253,21 @@ ROLES: dict[str, Roles] = {
     "phong": Roles(
         {"kd": [0.2, 0.3, 0.4], "ks": [0.3, 0.2, 0.1], "n": 80.0}, "n", "exponent", "kd"
     ),
+    "sgd": Roles(
+        # alpha is a slope variance (Beckmann's m^2), mapped as a width: the near-mirror
+        # regime then has m = 0.03 (alpha 1e-3); m = 1e-3 would need alpha 1e-6, below
+        # the table's bound of 1e-5
+        {"kd": [0.1, 0.2, 0.3], "ks": [0.3, 0.25, 0.2], "f0": [0.6, 0.4, 0.2], "alpha": 0.05},
+        "alpha",
+        "width",
+        "kd",
+    ),
+    "std": Roles(
+        {"kd": [0.1, 0.2, 0.3], "ks": [0.8, 0.7, 0.6], "alpha": 0.15, "gamma": 3.0},
+        "alpha",
+        "width",
+        "kd",
+    ),
     "walter": Roles(
         {"kd": [0.1, 0.2, 0.3], "ks": [0.8, 0.7, 0.6], "f0": [0.9, 0.6, 0.3], "alpha": 0.15},
         "alpha",
