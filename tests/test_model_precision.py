@@ -341,7 +341,18 @@ def _check(case: Case, pairs: tuple) -> None:
     assert not failures, describe(failures)
 
 
-@pytest.mark.parametrize("case", ALL_CASES, ids=[c.id for c in ALL_CASES])
+def _first_row_per_model() -> list:
+    """The first row of each model runs in the default suite, further option rows are
+    ``slow`` (``bash benchmarks/slow_checks.sh``), as in ``tests/test_identifiability.py``:
+    a 40-digit reference costs up to a minute a row (SGD's two Smith integrals)."""
+    seen, out = set(), []
+    for c in ALL_CASES:
+        out.append(pytest.param(c, id=c.id, marks=() if c.model not in seen else pytest.mark.slow))
+        seen.add(c.model)
+    return out
+
+
+@pytest.mark.parametrize("case", _first_row_per_model())
 def test_float64_matches_high_precision_reference(case):
     _check(case, PAIRS)
 
