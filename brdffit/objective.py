@@ -34,6 +34,10 @@ from brdffit.errors import ParameterError
 from brdffit.metrics import Metric, Prepared
 from brdffit.parameters import Parameter, ParameterLayout, Params
 
+GRAM_CHUNK = 65_536
+"""Residuals per chunk of :meth:`Objective.block_moments`' Gram sums (65,536 x k^2 floats,
+50 MB for k = 10)."""
+
 
 class Objective(eqx.Module):
     """``0.5 sum rho(r^2)`` of one model under one metric (module docstring).
@@ -138,17 +142,31 @@ class Objective(eqx.Module):
         gram, k = both.T @ both, jac.shape[1]
         return gram[:k, :k], gram[k:, k:], e @ e, r @ r
 
-    def block_scores(
+    def block_moments(
         self, z: Float[Array, " k"], prep: Prepared, block: Int[Array, " n"], n_blocks: int
-    ) -> Float[Array, "b k"]:
-        """Per-block sums of the scores ``J_i^T e_i`` over each block's samples, (b, k).
+    ) -> tuple[Float[Array, "b k"], Float[Array, "b k k"]]:
+        """Per block: the summed scores ``sum J_i^T e_i`` (b, k) and ``J_b^T J_b`` (b, k, k).
 
         ``block``: the block index (0..``n_blocks``-1) of each sample; its three residuals
-        (RGB) go to the same block. Natural units, as :meth:`natural_moments`.
+        (RGB) go to the same block. Natural units, as :meth:`natural_moments`. The Gram
+        matrices are summed over chunks of :data:`GRAM_CHUNK` residuals, so memory stays
+        at ``GRAM_CHUNK k^2`` floats whatever the sample count.
         """
         jac, e, _ = self._natural_jacobian(z, prep)
         ids = jnp.repeat(block, 3)  # residuals are sample-major: (n, 3).ravel()
-        return jax.ops.segment_sum(jac * e[:, None], ids, num_segments=n_blocks)
+        scores = jax.ops.segment_sum(jac * e[:, None], ids, num_segments=n_blocks)
+        m, k = jac.shape
+        pad = -m % GRAM_CHUNK
+        jc = jnp.pad(jac, ((0, pad), (0, 0))).reshape(-1, GRAM_CHUNK, k)
+        ic = jnp.pad(ids, (0, pad), constant_values=n_blocks).reshape(-1, GRAM_CHUNK)
+
+        def add(acc: Array, chunk: tuple[Array, Array]) -> tuple[Array, None]:
+            j, i = chunk
+            outer = j[:, :, None] * j[:, None, :]
+            return acc + jax.ops.segment_sum(outer, i, num_segments=n_blocks + 1), None
+
+        grams, _ = jax.lax.scan(add, jnp.zeros((n_blocks + 1, k, k), jac.dtype), (jc, ic))
+        return scores, grams[:n_blocks]
 
     def _natural_jacobian(self, z: Array, prep: Prepared) -> tuple[Array, Array, Array]:
         """``(J, e, r)``: the robust residuals' Jacobian in natural units, ``e`` and ``r``."""
@@ -193,9 +211,9 @@ def natural_moments(obj: Objective, z: Array, prep: Prepared):
 
 
 @eqx.filter_jit
-def block_scores(obj: Objective, z: Array, prep: Prepared, block: Array, n_blocks: int):
-    """Jitted :meth:`Objective.block_scores` (``n_blocks`` static)."""
-    return obj.block_scores(z, prep, block, n_blocks)
+def block_moments(obj: Objective, z: Array, prep: Prepared, block: Array, n_blocks: int):
+    """Jitted :meth:`Objective.block_moments` (``n_blocks`` static)."""
+    return obj.block_moments(z, prep, block, n_blocks)
 
 
 @eqx.filter_jit

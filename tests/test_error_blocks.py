@@ -1,4 +1,4 @@
-"""errors="blocks": the cluster-robust sandwich over (theta_h, theta_d) blocks.
+"""errors="blocks": the cluster jackknife over (theta_h, theta_d) blocks.
 
 Checked by simulation against the spread of the estimates themselves: Lambert data whose
 noise is shared by every sample of a 10-degree (theta_h, theta_d) block (the shape of
@@ -8,6 +8,7 @@ block errors match the standard deviation of the estimates over repeated data se
 
 from __future__ import annotations
 
+import jax.numpy as jnp
 import numpy as np
 import pytest
 
@@ -15,7 +16,8 @@ from brdffit import fit_many, models
 from brdffit.errors import ParameterError
 from brdffit.measurements import Measurements
 from brdffit.metrics import get_metric, keep_mask, prepare
-from brdffit.uncertainty import BLOCK_DEG, block_index
+from brdffit.objective import Objective, block_moments, natural_moments
+from brdffit.uncertainty import BLOCK_DEG, block_covariance, block_index
 from tests.helpers import random_pairs
 
 WI, WO = random_pairs(11, 4000)
@@ -72,3 +74,32 @@ def test_blocks_are_occupied_cells_of_the_theta_h_theta_d_grid():
 def test_unknown_errors_kind_is_named():
     with pytest.raises(ParameterError, match="errors='bootstrap'.*blocks"):
         fit_many(models.get("lambert"), _datasets(1, 0), "ngan", errors="bootstrap")
+
+
+def test_block_errors_equal_refits_leaving_each_block_out_for_a_linear_model():
+    """Lambert under ngan is linear in kd: the one-step jackknife (errors="blocks", power 1
+    of the leverage correction) is exact there, so it must equal (G-1)/G sum_b d_b d_b^T
+    with d_b the move of a real refit without block b (weight 0: every refit keeps its
+    sample count)."""
+    data = _datasets(1, seed=5)[0]
+    model = models.get("lambert")
+    r = fit_many(model, [data], "ngan", errors="blocks", cut_deg=None)[0]
+    prep = prepare(data, get_metric("ngan"), cut_deg=None)
+    ids, g = block_index(prep)
+    obj = Objective.build(model, "ngan")
+    z = jnp.asarray(obj.layout.solver_vector(r.params))
+    jtj = np.asarray(natural_moments(obj, z, prep)[0])
+    scores, grams = (np.asarray(a) for a in block_moments(obj, z, prep, jnp.asarray(ids), g))
+    cr3, _ = block_covariance(jtj, scores, grams)
+    cr2, _ = block_covariance(jtj, scores, grams, power=0.5)
+    np.testing.assert_allclose(cr3, r.covariance, rtol=1e-12)
+    keep = np.flatnonzero(keep_mask(data, None))
+    left_out = []
+    for b in range(g):
+        w = data.weights.copy()
+        w[keep[ids == b]] = 0.0
+        left_out.append(Measurements.from_directions(data.wi, data.wo, data.values, weights=w))
+    refits = fit_many(model, left_out, "ngan", cut_deg=None)
+    moves = np.array([q.params["kd"] for q in refits]) - r.params["kd"]
+    np.testing.assert_allclose(cr3, (g - 1) / g * moves.T @ moves, rtol=1e-6)
+    assert np.all(np.diag(cr2) < np.diag(cr3))  # CR2 corrects the leverage half as much
