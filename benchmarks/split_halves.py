@@ -33,7 +33,7 @@ from brdffit import fit, models
 from brdffit.loading import load_measurements
 from brdffit.measurements import Measurements
 from brdffit.metrics import get_metric, keep_mask, prepare
-from brdffit.uncertainty import BLOCK_DEG
+from brdffit.uncertainty import block_cells
 
 NBRDF = Path(__file__).resolve().parents[2] / "shared" / "data" / "merl_nbrdf"
 KINDS = ("sandwich", "classic", "blocks")
@@ -50,9 +50,8 @@ def halves(data: Measurements, cut_deg: float) -> tuple[Measurements, Measuremen
     """The cells of even and of odd (theta_h, theta_d) block parity, inside the cut."""
     keep = np.flatnonzero(keep_mask(data, cut_deg))
     prep = prepare(data, get_metric("low_e2"), keep=keep)
-    th = np.degrees(np.arccos(np.clip(np.asarray(prep.g.cos_h), -1, 1)))
-    td = np.degrees(np.arccos(np.clip(np.asarray(prep.g.cos_d), -1, 1)))
-    parity = (np.floor(th / BLOCK_DEG) + np.floor(td / BLOCK_DEG)).astype(int) % 2
+    i, j = block_cells(prep)
+    parity = (i + j) % 2
     out = []
     for side in (0, 1):
         k = keep[parity == side]

@@ -70,13 +70,18 @@ MIN_BLOCKS = 20
 sum of ``G`` scores has rank ``< G`` and is unreliable for small ``G``)."""
 
 
-def block_index(prep: Prepared, block_deg: float = BLOCK_DEG) -> tuple[np.ndarray, int]:
-    """Each sample's (theta_h, theta_d) block, numbered 0..G-1 over occupied blocks; G."""
+def block_cells(prep: Prepared, block_deg: float = BLOCK_DEG) -> tuple[np.ndarray, np.ndarray]:
+    """Each sample's block coordinates ``(floor(theta_h / deg), floor(theta_d / deg))``."""
     th = np.degrees(np.arccos(np.clip(np.asarray(prep.g.cos_h), -1.0, 1.0)))
     td = np.degrees(np.arccos(np.clip(np.asarray(prep.g.cos_d), -1.0, 1.0)))
+    return np.floor(th / block_deg).astype(int), np.floor(td / block_deg).astype(int)
+
+
+def block_index(prep: Prepared, block_deg: float = BLOCK_DEG) -> tuple[np.ndarray, int]:
+    """Each sample's (theta_h, theta_d) block, numbered 0..G-1 over occupied blocks; G."""
+    i, j = block_cells(prep, block_deg)
     per_row = int(np.ceil(90.0 / block_deg)) + 1
-    raw = np.floor(th / block_deg).astype(int) * per_row + np.floor(td / block_deg).astype(int)
-    occupied, ids = np.unique(raw, return_inverse=True)
+    occupied, ids = np.unique(i * per_row + j, return_inverse=True)
     return ids.astype(np.int32), int(occupied.size)
 
 
