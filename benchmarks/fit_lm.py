@@ -44,6 +44,7 @@ from brdffit import fit, models, synthesize
 from brdffit.merl import merl_subgrid
 from brdffit.metrics import get_metric, keep_mask, prepare
 from brdffit.metrics import residuals as jax_residuals
+from brdffit.parameters import ParameterLayout
 
 TRUTH = {"kd": [0.12, 0.30, 0.55], "ks": [0.8, 0.8, 0.8], "f0": [0.9, 0.6, 0.3], "alpha": 0.12}
 
@@ -52,17 +53,17 @@ class Layout:
     """The model's free parameters in table order, as one flat natural vector."""
 
     def __init__(self, model):
-        self.names = [p.name for p in model.parameters]
-        self.sizes = [p.size for p in model.parameters]
-        self.lo = np.concatenate([np.full(p.size, p.bounds[0]) for p in model.parameters])
-        self.hi = np.concatenate([np.full(p.size, p.bounds[1]) for p in model.parameters])
-        self.defaults = np.concatenate([np.ravel(model.defaults()[n]) for n in self.names])
+        self.table = model.parameters
+        self.names = [p.name for p in self.table]
+        self.sizes = [p.size for p in self.table]
+        self.lo, self.hi = ParameterLayout.build(self.table).bounds_flat()
+        self.defaults = self.pack(model.defaults())
 
     def unpack(self, x) -> dict:
         out, i = {}, 0
-        for n, k in zip(self.names, self.sizes, strict=True):
-            out[n] = x[i] if n == "alpha" else x[i : i + k]
-            i += k
+        for p in self.table:
+            out[p.name] = x[i] if p.shape == () else x[i : i + p.size]
+            i += p.size
         return out
 
     def pack(self, params) -> np.ndarray:
