@@ -296,7 +296,10 @@ def build_parser() -> argparse.ArgumentParser:
     data_args(s)
     fit_args(s)
     s.add_argument(
-        "--noise", default="constant", choices=["constant", "multiplicative", "additive"]
+        "--noise",
+        default="mixed",
+        choices=["mixed", "multiplicative", "additive", "constant"],
+        help="likelihood's noise model (default mixed: an absolute plus a relative scale)",
     )
     s.add_argument("--steps", type=int, default=2000)
     s.add_argument("--walkers", type=int, default=None)

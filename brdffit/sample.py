@@ -1,18 +1,35 @@
 """Posterior sampling with emcee's affine-invariant ensemble sampler.
 
 Likelihood: the metric's residual vector ``r`` (:func:`brdffit.metrics.residuals`) on
-a seeded subsample of the valid samples, Gaussian with a free noise scale ``sigma``:
+a seeded subsample of the valid samples, Gaussian with free noise scales:
 
-* ``noise="constant"``: ``r_i ~ N(0, sigma^2)``;
-* ``noise="multiplicative"``: ``r_i ~ N(0, (sigma s_i)^2)``, ``s_i = |d r_i / d ln f_i|``,
-  right for log-normal noise on the data (DESIGN.md: heteroscedastic residuals break
-  a constant scale even when the model is right);
-* ``noise="additive"``: the same with ``s_i = |d r_i / d f_i|``, for Gaussian noise
-  of constant size in 1/sr.
+* ``noise="mixed"`` (the default): ``r_i ~ N(0, (sigma_add a_i)^2 + (sigma_mult m_i)^2)``
+  with ``a_i = |d r_i / d f_i|`` and ``m_i = |d r_i / d ln f_i|``: noise on the data of
+  variance ``sigma_add^2 + (sigma_mult f)^2`` (an absolute floor in 1/sr plus a
+  relative part), propagated through the metric to first order. It contains the two
+  below as its edges, so it is right whichever of them the data have, and both scales
+  are sampled;
+* ``noise="multiplicative"``: ``r_i ~ N(0, (sigma m_i)^2)``, right for log-normal noise
+  on the data (DESIGN.md: heteroscedastic residuals break a constant scale even when
+  the model is right);
+* ``noise="additive"``: ``r_i ~ N(0, (sigma a_i)^2)``, for Gaussian noise of constant
+  size in 1/sr;
+* ``noise="constant"``: ``r_i ~ N(0, sigma^2)``, one variance for every residual. No
+  metric in brdffit has such residuals on data with either kind of noise (the weights
+  and the log make the scale vary from cell to cell), so its intervals are wrong in
+  both directions; it is kept for comparison. ``benchmarks/results/calibration.md``
+  measures the coverage of each.
 
-``s_i`` is computed once, at the start model (the LM optimum), floored at 1e-3 of
-its median.
-``sigma`` is sampled as ``log_sigma`` with a flat prior on [-30, 10].
+The factors ``a_i``, ``m_i`` are computed once, at the start model (the LM optimum),
+each floored at 1e-3 of its median.
+Each scale is sampled as its logarithm on [-30, 10] (``log_sigma``, or
+``log_sigma_add`` and ``log_sigma_mult`` for ``mixed``). A single scale has the
+log-uniform prior (flat in ``log_sigma``): the data always pin it. The two scales of
+``mixed`` are uniform in ``sigma`` instead, because either may be zero: a log-uniform
+prior would leave a flat, improper-looking plateau down to ``exp(-30)`` under a scale
+the data cannot see, which the walkers would wander over. A uniform prior on a scale
+that may vanish is the usual choice for variance components (Gelman 2006, "Prior
+distributions for variance parameters in hierarchical models").
 
 Priors come from the parameter bounds: log-uniform for ``log``-transformed
 parameters, uniform otherwise; ``priors`` overrides any of them with a JAX function
@@ -65,7 +82,7 @@ from brdffit.objective import Objective, freeze_map, start_params
 from brdffit.parameters import Parameter, ParameterLayout
 from brdffit.result import FitResult
 
-NOISE_MODELS = ("constant", "multiplicative", "additive")
+NOISE_MODELS = ("mixed", "multiplicative", "additive", "constant")
 LOG_SIGMA_BOUNDS = (-30.0, 10.0)
 AT_BOUND_SPAN = 0.01
 """At-bound check: largest gap to the bound, as a share of the span (prior coordinate)."""
@@ -86,8 +103,10 @@ class Posterior:
     """Chains and diagnostics from :func:`sample`; every field always present.
 
     Fields: ``model``, ``options``, ``metric``, ``noise``; ``labels`` of the sampled
-    scalars (free parameters, then ``log_sigma``); ``chain`` (steps, walkers, dim) in
-    natural units; ``log_prob`` (steps, walkers); ``acceptance_fraction`` (walkers,);
+    scalars (free parameters, then the log noise scales: ``log_sigma``, or
+    ``log_sigma_add`` and ``log_sigma_mult`` for ``noise="mixed"``); ``chain``
+    (steps, walkers, dim) in natural units; ``log_prob`` (steps, walkers);
+    ``acceptance_fraction`` (walkers,);
     ``autocorr_time`` (dim,) integrated autocorrelation times in steps, measured after
     ``burn``; ``burn``; ``n_subsample`` samples the likelihood used; ``stuck_walkers``
     indices of walkers that barely moved; ``at_bound`` (label, bound) pairs of the
@@ -238,16 +257,23 @@ def _log_prior_natural(p: Parameter, x: jax.Array) -> jax.Array:
 
 
 class _Target(eqx.Module):
-    """The jitted log-posterior in unconstrained coordinates (free scalars + log_sigma)."""
+    """The jitted log-posterior in unconstrained coordinates (free scalars + log scales).
+
+    ``scales`` (k, residuals) holds the per-residual factor of each of the k noise
+    scales; the residual variance is ``sum_k (exp(log_sigma_k) scales_k)^2``.
+    """
 
     objective: Objective
     priors: tuple = eqx.field(static=True)
+    uniform_sigma: bool = eqx.field(static=True)
 
-    def __call__(self, theta, prep, scale):
-        u, log_sigma = theta[:-1], theta[-1]
-        lp = jnp.where(
-            (log_sigma > LOG_SIGMA_BOUNDS[0]) & (log_sigma < LOG_SIGMA_BOUNDS[1]), 0.0, -jnp.inf
-        )
+    def __call__(self, theta, prep, scales):
+        k = scales.shape[0]
+        u, log_sigma = theta[:-k], theta[-k:]
+        inside = jnp.all((log_sigma > LOG_SIGMA_BOUNDS[0]) & (log_sigma < LOG_SIGMA_BOUNDS[1]))
+        lp = jnp.where(inside, 0.0, -jnp.inf)
+        if self.uniform_sigma:
+            lp = lp + jnp.sum(log_sigma)  # p(sigma) uniform: p(log sigma) = sigma
         i = 0
         for p, prior in zip(self.objective.free, self.priors, strict=True):
             up = u[i : i + p.size]
@@ -258,41 +284,78 @@ class _Target(eqx.Module):
         obj = self.objective
         params = obj.layout.params(u, "unconstrained")
         r = metrics_mod.residuals(obj.metric, obj.model.evaluate(params, prep.g), prep)
-        sig = jnp.exp(log_sigma) * scale
-        ll = -jnp.sum(jnp.log(sig)) - 0.5 * jnp.sum((r / sig) ** 2)
+        var = jnp.sum((jnp.exp(log_sigma)[:, None] * scales) ** 2, axis=0)
+        ll = -0.5 * jnp.sum(jnp.log(var)) - 0.5 * jnp.sum(r * r / var)
         out = lp + ll
         return jnp.where(jnp.isfinite(out), out, -jnp.inf)
 
 
 @eqx.filter_jit
-def _batched(target, thetas, prep, scale):
-    return jax.vmap(lambda t: target(t, prep, scale))(thetas)
+def _batched(target, thetas, prep, scales):
+    return jax.vmap(lambda t: target(t, prep, scales))(thetas)
 
 
 @eqx.filter_jit
-def _noise_scale(metric, prep, f_model, noise):
-    """``s_i = |d r_i / d ln f|`` or ``|d r_i / d f|`` at the model, floored at 1e-3 x median.
+def _factor(metric, prep, f_model, relative: bool):
+    """``|d r_i / d ln f|`` (``relative``) or ``|d r_i / d f|`` at the model, floored.
 
-    Taken at the start model (the LM optimum), not at the noisy data: weights that
-    depend on the data's own noise bias the estimate (by about -sigma^2).
+    Floor: 1e-3 x the median. Taken at the start model (the LM optimum), not at the
+    noisy data: weights that depend on the data's own noise bias the estimate (by
+    about -sigma^2).
     """
 
     def r_of(f):
         return metrics_mod.residuals(metric, f, prep)
 
-    tangent = f_model if noise == "multiplicative" else jnp.ones_like(f_model)
+    tangent = f_model if relative else jnp.ones_like(f_model)
     s = jnp.abs(jax.jvp(r_of, (f_model,), (tangent,))[1])
     return jnp.maximum(s, 1e-3 * jnp.median(s))
 
 
-def _start_ball(layout: ParameterLayout, init: object, u0: np.ndarray) -> np.ndarray:
+def _noise_scales(metric, prep, f_model, noise: str) -> tuple[jax.Array, tuple[str, ...]]:
+    """Per-residual factors (k, residuals) of the ``noise`` model's scales, and their labels."""
+    if noise == "constant":
+        return jnp.ones((1, 3 * prep.n)), ("log_sigma",)
+    add = _factor(metric, prep, f_model, False) if noise in ("additive", "mixed") else None
+    mult = _factor(metric, prep, f_model, True) if noise in ("multiplicative", "mixed") else None
+    if noise == "mixed":
+        return jnp.stack([add, mult]), ("log_sigma_add", "log_sigma_mult")
+    return (add if add is not None else mult)[None, :], ("log_sigma",)
+
+
+def _start_sigmas(r0: np.ndarray, scales: np.ndarray, passes: int = 3) -> np.ndarray:
+    """Start values of the noise scales from the start model's residuals ``r0``.
+
+    One scale: the root mean square of ``r0 / scale``. Several: a moment estimate,
+    ``r0_i^2 ~ sum_k v_k scales_ki^2`` solved for ``v >= 0`` by non-negative least
+    squares, weighted by ``1 / var_i^2`` (``Var r_i^2 = 2 var_i^2`` for a Gaussian
+    residual) with ``var_i`` from the previous pass, starting from an equal split.
+    Each scale is kept at least 1e-2 of the value it would have if it explained the
+    residuals alone, so that every walker starts at a finite log scale; the sampler
+    then finds the posterior (this is only its start).
+    """
+    alone = np.sqrt(np.mean((r0[None, :] / scales) ** 2, axis=1))
+    if scales.shape[0] == 1:
+        return alone
+    from scipy.optimize import nnls
+
+    a = scales.T**2
+    v = alone**2 / scales.shape[0]
+    for _ in range(passes):
+        w = 1.0 / (a @ v)
+        v, _ = nnls(a * w[:, None], r0**2 * w)
+        v = np.maximum(v, (1e-2 * alone) ** 2)
+    return np.sqrt(v)
+
+
+def _start_ball(layout: ParameterLayout, init: object, u0: np.ndarray, k: int) -> np.ndarray:
     """Per-dimension spread of the initial walkers in unconstrained units.
 
     A tenth of the LM standard errors mapped through the transforms when ``init`` is a
-    :class:`FitResult` with errors, else 1e-4; 1e-2 for ``log_sigma``.
+    :class:`FitResult` with errors, else 1e-4; 1e-2 for the ``k`` log noise scales.
     """
     spread = np.full(u0.size, 1e-4)
-    spread[-1] = 1e-2
+    spread[-k:] = 1e-2
     if isinstance(init, FitResult) and init.stderr is not None:
         i = 0
         for p in layout.free:
@@ -311,7 +374,7 @@ def sample(
     metric: str | None = None,
     init: FitResult | Mapping[str, object] | None = None,
     freeze: Freeze = None,
-    noise: str = "constant",
+    noise: str = "mixed",
     priors: Mapping[str, Callable[[jax.Array], jax.Array]] | None = None,
     n_walkers: int | None = None,
     n_steps: int = 2000,
@@ -329,7 +392,8 @@ def sample(
     - ``metric``: residuals of the likelihood; default the ``init`` fit's, else ``low_e2``.
     - ``init``: the LM result (or a natural parameter dict) the walkers start around;
       walkers start in a Gaussian ball a tenth of its standard errors wide.
-    - ``noise``: ``"constant"``, ``"multiplicative"`` or ``"additive"`` (module docstring).
+    - ``noise``: ``"mixed"`` (default), ``"multiplicative"``, ``"additive"`` or
+      ``"constant"`` (module docstring).
     - ``priors``: name -> log density of the natural value (JAX function).
     - ``n_walkers`` (default ``max(32, 4 dim)``), ``n_steps``, ``burn`` (default a third).
     - ``n_subsample``: samples drawn (seeded) from the valid ones for the likelihood.
@@ -359,21 +423,21 @@ def sample(
 
     full = {**start, **frozen}
     f_start = model.evaluate(full, prep.g)
-    if noise == "constant":
-        scale = jnp.ones(3 * prep.n)
-    else:
-        scale = _noise_scale(m, prep, f_start, noise)
-    r0 = metrics_mod.residuals(m, f_start, prep)
-    sigma0 = float(jnp.sqrt(jnp.mean((r0 / scale) ** 2)))
-    u0 = np.concatenate([np.asarray(layout.unconstrained(start)), [math.log(max(sigma0, 1e-12))]])
+    scales, sigma_labels = _noise_scales(m, prep, f_start, noise)
+    r0 = np.asarray(metrics_mod.residuals(m, f_start, prep))
+    sigma0 = _start_sigmas(r0, np.asarray(scales))
+    u0 = np.concatenate(
+        [np.asarray(layout.unconstrained(start)), np.log(np.maximum(sigma0, 1e-12))]
+    )
     ndim = u0.size
     n_walkers = n_walkers or max(32, 4 * ndim)
-    p0 = u0 + _start_ball(layout, init, u0) * rng.standard_normal((n_walkers, ndim))
+    spread = _start_ball(layout, init, u0, len(sigma_labels))
+    p0 = u0 + spread * rng.standard_normal((n_walkers, ndim))
 
-    target = _Target(obj, tuple((priors or {}).get(p.name) for p in layout.free))
+    target = _Target(obj, tuple((priors or {}).get(p.name) for p in layout.free), noise == "mixed")
 
     def log_prob(thetas: np.ndarray) -> np.ndarray:
-        return np.asarray(_batched(target, jnp.asarray(thetas), prep, scale))
+        return np.asarray(_batched(target, jnp.asarray(thetas), prep, scales))
 
     sampler = emcee.EnsembleSampler(n_walkers, ndim, log_prob, vectorize=True)
     sampler.random_state = np.random.RandomState(int(rng.integers(2**31))).get_state()
@@ -404,7 +468,7 @@ def sample(
         notes.append((text, PosteriorAtBoundWarning))
     for text, category in notes:
         warnings.warn(text, category, stacklevel=2)
-    labels = tuple(layout.labels()) + ("log_sigma",)
+    labels = tuple(layout.labels()) + sigma_labels
     return Posterior(
         model=model.name,
         options=model.options(),

@@ -143,8 +143,43 @@ def test_corner_plot_and_bad_arguments():
         warnings.simplefilter("ignore", ChainTooShortWarning)
         post = sample(m, data, n_steps=40, n_walkers=12, progress=False)
         fig = post.corner(truths={"kd": [0.3, 0.3, 0.3]})
-    assert len(fig.axes) == 16
+    # The default noise model is "mixed": two sampled scales after the three albedos.
+    assert post.noise == "mixed" and post.labels[-2:] == ("log_sigma_add", "log_sigma_mult")
+    assert len(fig.axes) == 25
     with pytest.raises(ParameterError, match="noise='weird'"):
         sample(m, data, noise="weird")
     with pytest.raises(ParameterError, match="not free parameters"):
         sample(m, data, priors={"alpha": lambda x: 0.0})
+
+
+@pytest.mark.parametrize(
+    ("noise_add", "noise_mult", "metric"),
+    [(0.003, 0.03, "low_e2"), (0.006, 0.0, "ngan"), (0.0, 0.05, "low_e2")],
+    ids=["both", "additive", "multiplicative"],
+)
+def test_mixed_noise_recovers_both_scales(noise_add, noise_mult, metric):
+    # Data with an absolute (1/sr) and a relative noise scale: the default likelihood's
+    # two scales bracket the generator's, and a scale the data lack comes out near 0.
+    m = models.get("walter", specular_weight=False)
+    data = synthesize(
+        m, TRUTH, stride=(9, 9, 9), noise_add=noise_add, noise_mult=noise_mult, seed=7
+    )
+    r = fit(m, data, metric, n_restarts=0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ChainTooShortWarning)
+        post = sample(m, data, init=r, n_steps=900, burn=300, seed=1, progress=False)
+    q = post.quantiles()
+    for lab, true in (("log_sigma_add", noise_add), ("log_sigma_mult", noise_mult)):
+        lo, med, hi = np.exp(q[lab])
+        if true > 0:
+            assert lo <= true <= hi and abs(med / true - 1) < 0.1, (lab, lo, med, hi)
+        else:
+            # Absent: at the median value it adds under a tenth of the noise present.
+            f_med = float(np.median(data.values[data.valid]))
+            abs_hi = hi if lab.endswith("add") else hi * f_med  # 1/sr
+            present = noise_mult * f_med if lab.endswith("add") else noise_add
+            assert abs_hi < 0.1 * present, (lab, abs_hi, present)
+    lo = np.array([q[lab][0] for lab in post.labels[:-2]])
+    hi = np.array([q[lab][2] for lab in post.labels[:-2]])
+    t = _flat_truth(post.labels[:-2])
+    assert np.sum((lo <= t) & (t <= hi)) >= 5, (lo, hi, t)  # 7 scalars at nominal 95%
