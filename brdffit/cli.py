@@ -21,6 +21,12 @@ MODELS_HELP = (
 )
 
 
+FAMILIES_HELP = (
+    "CSV file of material,family rows; replaces the family guessed from the material name "
+    "(unknown names are 'other')"
+)
+
+
 class _Parser(argparse.ArgumentParser):
     def error(self, message: str) -> None:  # one line, exit 2
         sys.stderr.write(f"brdffit: {message}\n")
@@ -106,26 +112,45 @@ def cmd_fit(args) -> None:
         _write(args.json, r.to_json())
 
 
+def _say(text: str) -> None:
+    """A progress line on stderr, shown at once (stdout keeps the reports)."""
+    sys.stderr.write(f"{text}\n")
+    sys.stderr.flush()
+
+
 def cmd_sample(args) -> None:
+    """The LM fit (announced, then its report), the sampler (tqdm progress), the posterior
+    summary; the sampler's warnings once each, as ``brdffit sample: warning: ...`` lines
+    on stderr (not as Python warnings, and not again in the summary)."""
+    import dataclasses
+    import warnings
+
     from brdffit.fit import fit
     from brdffit.sample import sample
 
     model, data = _model(args.model, args.option), _load(args)
+    _say(f"fitting {model.name} to {data.source} by Levenberg-Marquardt ({args.metric}) ...")
     r = fit(model, data, args.metric, freeze=_freeze(args.freeze), cut_deg=args.cut, throw=False)
-    post = sample(
-        model,
-        data,
-        init=r,
-        freeze=_freeze(args.freeze),
-        noise=args.noise,
-        n_steps=args.steps,
-        n_walkers=args.walkers,
-        n_subsample=args.subsample,
-        cut_deg=args.cut,
-        seed=args.seed,
-        progress=not args.no_progress,
-    )
-    print(post.summary())
+    print(r.report(), end="\n\n", flush=True)
+    _say(f"sampling the posterior with emcee ({args.steps} steps, noise {args.noise}) ...")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        post = sample(
+            model,
+            data,
+            init=r,
+            freeze=_freeze(args.freeze),
+            noise=args.noise,
+            n_steps=args.steps,
+            n_walkers=args.walkers,
+            n_subsample=args.subsample,
+            cut_deg=args.cut,
+            seed=args.seed,
+            progress=not args.no_progress,
+        )
+    for text in dict.fromkeys([*(str(w.message) for w in caught), *post.warnings]):
+        _say(f"brdffit sample: warning: {' '.join(text.split())}")
+    print(dataclasses.replace(post, warnings=()).summary())
     if args.corner:
         import matplotlib
 
@@ -159,6 +184,10 @@ def cmd_sweep(args) -> None:
         materials = sweep.nbrdf_materials(args.nbrdf_dir, names)
     else:
         materials = sweep.synthetic_materials(args.synthetic, seed=args.seed)
+    if args.families:
+        from brdffit.families import read_families
+
+        materials = sweep.with_families(materials, read_families(args.families))
     s = sweep.run_sweep(
         args.out,
         materials,
@@ -181,7 +210,7 @@ def cmd_sweep(args) -> None:
 def cmd_report(args) -> None:
     from brdffit.report import write_report
 
-    print(write_report(args.sweep_dir))
+    print(write_report(args.sweep_dir, families=args.families))
 
 
 def cmd_check(args) -> int:
@@ -336,9 +365,11 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--seed", type=int, default=0)
     s.add_argument("--jobs", type=int, default=None, help="worker processes (default: cores)")
     s.add_argument("--no-progress", action="store_true")
+    s.add_argument("--families", metavar="CSV", help=FAMILIES_HELP)
     s.set_defaults(func=cmd_sweep)
     s = sub.add_parser("report", help="Markdown report of a sweep folder")
     s.add_argument("sweep_dir")
+    s.add_argument("--families", metavar="CSV", help=FAMILIES_HELP)
     s.set_defaults(func=cmd_report)
     s = sub.add_parser("check", help="values and gradients at extreme directions and bounds")
     s.add_argument(

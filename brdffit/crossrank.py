@@ -2,15 +2,17 @@
 
 Per material, the models fitted under one metric are ranked as :func:`brdffit.rank`
 does (by the metric value, losses within a relative :data:`~brdffit.rank.LOSS_RTOL`
-tied and given their average rank; AIC and BIC ranks beside it; unconverged and missing
-fits last). Over all materials each model gets its mean rank, its wins (materials where
+tied and given their average rank; AIC and BIC ranks beside it; a fit that did not
+converge ranked by the finite loss it reached and marked, failed and missing fits
+last). Over all materials each model gets its mean rank, its wins (materials where
 it ranks first; a tie for first is a win for every tied model, so wins can add up to
 more than the number of materials) and its median relative error ``loss / best loss on
-that material - 1`` (converged fits only), each with a 95% percentile bootstrap interval
+that material - 1``, each with a 95% percentile bootstrap interval
 over materials (``numpy.random.default_rng(seed)``, materials drawn with replacement).
 A model is named by its label (:func:`brdffit.models.label`), so each variant of a model
-(``lafortune[n_lobes=2]``) ranks as a model of its own. Families come from
-:mod:`brdffit.families`.
+(``lafortune[n_lobes=2]``) ranks as a model of its own. Families come from a
+``families`` mapping (a user's file, :func:`brdffit.families.read_families`), else the
+sweep manifest, else :func:`brdffit.families.family_of`.
 """
 
 from __future__ import annotations
@@ -19,7 +21,7 @@ import json
 import math
 import os
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -27,6 +29,7 @@ import numpy as np
 from brdffit.errors import SweepError
 from brdffit.families import FAMILIES, family_of
 from brdffit.rank import LOSS_RTOL, rank_text, ranks
+from brdffit.result import loss_kind, per_sample
 from brdffit.tables import render
 
 
@@ -56,6 +59,7 @@ class Record:
     wall_time: float
     eval_ns: float
     provenance: str = "unrecorded"
+    loss_per_sample: float = math.nan
 
 
 @dataclass(frozen=True)
@@ -65,6 +69,7 @@ class SweepResults:
     manifest: dict
     records: tuple[Record, ...]
     errors: tuple[dict, ...]
+    families: dict = field(default_factory=dict)
 
     @property
     def materials(self) -> list[str]:
@@ -82,7 +87,9 @@ class SweepResults:
         return list(self.manifest["metrics"])
 
     def family(self, material: str) -> str:
-        """Family recorded in the manifest (else from the name)."""
+        """Family from ``families`` (a user's file), else the manifest, else the name."""
+        if material in self.families:
+            return self.families[material]
         m = self.manifest["materials"].get(material, {})
         return m.get("family") or family_of(material)
 
@@ -97,12 +104,22 @@ def provenance_label(d: dict | None) -> str:
     )
 
 
+def _record_family(d: dict, families: dict[str, str]) -> str:
+    return families.get(d["material"]) or d.get("family") or family_of(d["material"])
+
+
 def _num(x: object) -> float:
     return float("nan") if x is None else float(x)
 
 
-def load_sweep(sweep_dir: str | os.PathLike[str]) -> SweepResults:
-    """Read ``sweep.json`` and every ``<material>/<label>__<metric>[.error].json``."""
+def load_sweep(
+    sweep_dir: str | os.PathLike[str], families: dict[str, str] | None = None
+) -> SweepResults:
+    """Read ``sweep.json`` and every ``<material>/<label>__<metric>[.error].json``.
+
+    ``families``: material -> family, replacing the recorded ones for those materials.
+    """
+    families = dict(families or {})
     root = Path(sweep_dir)
     try:
         manifest = json.loads((root / "sweep.json").read_text())
@@ -117,7 +134,7 @@ def load_sweep(sweep_dir: str | os.PathLike[str]) -> SweepResults:
         records.append(
             Record(
                 material=d["material"],
-                family=d.get("family") or family_of(d["material"]),
+                family=_record_family(d, families),
                 model=d.get("label") or d["model"],
                 metric=d["metric"],
                 loss=_num(d["loss"]),
@@ -130,18 +147,21 @@ def load_sweep(sweep_dir: str | os.PathLike[str]) -> SweepResults:
                 wall_time=_num(d.get("wall_time")),
                 eval_ns=_num(d.get("eval_ns_per_sample")),
                 provenance=provenance_label(d.get("provenance")),
+                loss_per_sample=per_sample(d["metric"], _num(d["loss"]), d.get("n_samples", 0)),
             )
         )
-    return SweepResults(manifest, tuple(records), tuple(errors))
+    return SweepResults(manifest, tuple(records), tuple(errors), families)
 
 
 @dataclass(frozen=True)
 class Matrices:
-    """Materials x models arrays for one metric (NaN where missing or unconverged).
+    """Materials x models arrays for one metric (NaN where missing or failed).
 
-    ``loss``, ``aic``, ``bic``, ``rel`` (loss / best - 1); ``rank``, ``rank_aic``,
-    ``rank_bic`` (1 = best, ties share their average rank, missing and unconverged
-    ranked last; module docstring); ``win`` (bool: converged and tied for the best loss).
+    ``loss``, ``loss_per_sample``, ``aic``, ``bic``, ``rel`` (loss / best - 1); ``rank``,
+    ``rank_aic``, ``rank_bic`` (1 = best, ties share their average rank, a fit that did
+    not converge ranked by its finite loss, missing and failed ranked last; module
+    docstring); ``win`` (bool: a finite loss tied for the best); ``converged`` (bool: a
+    fit exists and converged; a finite loss where it is False is marked not converged).
     """
 
     metric: str
@@ -156,6 +176,8 @@ class Matrices:
     rank_aic: np.ndarray
     rank_bic: np.ndarray
     win: np.ndarray
+    loss_per_sample: np.ndarray | None = None
+    converged: np.ndarray | None = None
 
 
 def matrices(res: SweepResults, metric: str) -> Matrices:
@@ -164,12 +186,14 @@ def matrices(res: SweepResults, metric: str) -> Matrices:
         raise SweepError(f"metric {metric!r} is not in this sweep ({', '.join(res.metrics)})")
     mats, mods = res.materials, res.models
     shape = (len(mats), len(mods))
-    loss, aic, bic = (np.full(shape, np.nan) for _ in range(3))
+    loss, aic, bic, per = (np.full(shape, np.nan) for _ in range(4))
+    ok = np.zeros(shape, bool)
     im, jm = {m: i for i, m in enumerate(mats)}, {m: j for j, m in enumerate(mods)}
     for r in res.records:
-        if r.metric == metric and r.converged and r.material in im and r.model in jm:
+        if r.metric == metric and math.isfinite(r.loss) and r.material in im and r.model in jm:
             i, j = im[r.material], jm[r.model]
             loss[i, j], aic[i, j], bic[i, j] = r.loss, r.aic, r.bic
+            per[i, j], ok[i, j] = r.loss_per_sample, r.converged
     best = np.array([np.nanmin(row) if np.isfinite(row).any() else np.nan for row in loss])
     with np.errstate(invalid="ignore", divide="ignore"):
         rel = loss / best[:, None] - 1.0
@@ -188,12 +212,18 @@ def matrices(res: SweepResults, metric: str) -> Matrices:
         np.array([ranks(row) for row in aic]).reshape(shape),
         np.array([ranks(row) for row in bic]).reshape(shape),
         np.isfinite(loss) & (rank == first),
+        per,
+        ok,
     )
 
 
 @dataclass(frozen=True)
 class AggregateRow:
-    """One model over all materials; each ``(lo, hi)`` is a 95% bootstrap interval."""
+    """One model over all materials; each ``(lo, hi)`` is a 95% bootstrap interval.
+
+    ``n_materials`` counts the materials with a finite loss, ``n_unconverged`` those of
+    them whose fit did not converge (ranked by the loss it reached).
+    """
 
     model: str
     mean_rank: float
@@ -203,6 +233,7 @@ class AggregateRow:
     median_rel_err: float
     median_rel_err_ci: tuple[float, float]
     n_materials: int
+    n_unconverged: int = 0
 
 
 def _stats(rank: np.ndarray, win: np.ndarray, rel: np.ndarray, axis: int):
@@ -237,10 +268,17 @@ def aggregate(mx: Matrices, *, n_boot: int = 1000, seed: int = 0) -> tuple[Aggre
             median_rel_err=float(med[j]),
             median_rel_err_ci=ci(b_med, j),
             n_materials=int(np.isfinite(mx.loss[:, j]).sum()),
+            n_unconverged=_n_unconverged(mx, j),
         )
         for j, m in enumerate(mx.models)
     ]
     return tuple(sorted(rows, key=lambda r: (r.mean_rank, r.model)))
+
+
+def _n_unconverged(mx: Matrices, j: int) -> int:
+    if mx.converged is None:
+        return 0
+    return int((np.isfinite(mx.loss[:, j]) & ~mx.converged[:, j]).sum())
 
 
 def aggregate_table(rows: tuple[AggregateRow, ...], fmt: str = "markdown") -> str:
@@ -248,10 +286,11 @@ def aggregate_table(rows: tuple[AggregateRow, ...], fmt: str = "markdown") -> st
     if fmt == "csv":
         head = ["model", "mean_rank", "mean_rank_lo", "mean_rank_hi", "wins", "wins_lo"]
         head += ["wins_hi", "median_rel_err", "median_rel_err_lo", "median_rel_err_hi", "n"]
+        head += ["n_unconverged"]
         body = [
             [r.model, f"{r.mean_rank:.6g}", *(f"{x:.6g}" for x in r.mean_rank_ci), str(r.wins)]
             + [f"{x:.6g}" for x in (*r.wins_ci, r.median_rel_err, *r.median_rel_err_ci)]
-            + [str(r.n_materials)]
+            + [str(r.n_materials), str(r.n_unconverged)]
             for r in rows
         ]
         return render(head, body, "csv")
@@ -262,7 +301,7 @@ def aggregate_table(rows: tuple[AggregateRow, ...], fmt: str = "markdown") -> st
             f"{r.mean_rank:.2f} [{r.mean_rank_ci[0]:.2f}, {r.mean_rank_ci[1]:.2f}]",
             f"{r.wins} [{r.wins_ci[0]:.0f}, {r.wins_ci[1]:.0f}]",
             f"{r.median_rel_err:.3g} [{r.median_rel_err_ci[0]:.3g}, {r.median_rel_err_ci[1]:.3g}]",
-            str(r.n_materials),
+            f"{r.n_materials}" + (f" ({r.n_unconverged} not converged)" if r.n_unconverged else ""),
         ]
         for r in rows
     ]
@@ -270,19 +309,29 @@ def aggregate_table(rows: tuple[AggregateRow, ...], fmt: str = "markdown") -> st
 
 
 def per_material_table(mx: Matrices, fmt: str = "markdown") -> str:
-    """Every (material, model): metric value, AIC, BIC, their ranks, relative error."""
-    head = ["material", "family", "model", mx.metric, "AIC", "BIC", "rank", "rank AIC"]
-    head += ["rank BIC", "rel. error"]
+    """Every (material, model): metric value (as defined, and per sample), AIC, BIC,
+    their ranks, relative error, and whether the fit converged (``no``: ranked by the
+    loss it reached; ``-``: no result)."""
+    kind = loss_kind(mx.metric)
+    head = ["material", "family", "model", f"{mx.metric} ({kind})", "per sample", "AIC", "BIC"]
+    head += ["rank", "rank AIC", "rank BIC", "rel. error", "converged"]
+    per = mx.loss_per_sample if mx.loss_per_sample is not None else np.full_like(mx.loss, np.nan)
     body = []
     for i, mat in enumerate(mx.materials):
         for j in np.argsort(mx.rank[i], kind="stable"):
-            vals = (mx.loss[i, j], mx.aic[i, j], mx.bic[i, j])
+            vals = (mx.loss[i, j], per[i, j], mx.aic[i, j], mx.bic[i, j])
             body.append(
                 [mat, mx.families[i], mx.models[j], *(f"{v:.6g}" for v in vals)]
                 + [rank_text(x) for x in (mx.rank[i, j], mx.rank_aic[i, j], mx.rank_bic[i, j])]
-                + [f"{mx.rel[i, j]:.4g}"]
+                + [f"{mx.rel[i, j]:.4g}", _converged_text(mx, i, int(j))]
             )
     return render(head, body, fmt)
+
+
+def _converged_text(mx: Matrices, i: int, j: int) -> str:
+    if not np.isfinite(mx.loss[i, j]):
+        return "-"
+    return "yes" if mx.converged is None or mx.converged[i, j] else "no"
 
 
 def family_table(mx: Matrices, fmt: str = "markdown", top: int = 3) -> str:
@@ -344,28 +393,39 @@ def material_order(mx: Matrices) -> np.ndarray:
 
 
 def rank_matrix_figure(mx: Matrices, rows: tuple[AggregateRow, ...] | None = None):
-    """Image of ranks, materials (:func:`material_order`) x models (best mean rank first)."""
+    """Image of ranks, materials (:func:`material_order`) x models (best mean rank first).
+
+    A rank reached by a fit that did not converge is marked ``*``. The figure is sized
+    from its labels (constrained layout; the image at least 2.2 in tall, so the colour
+    bar holds its label), so no label is cut off.
+    """
     import matplotlib.pyplot as plt
 
     order = material_order(mx)
     cols = [mx.models.index(r.model) for r in (rows or aggregate(mx, n_boot=1))]
     img = mx.rank[np.ix_(order, cols)]
     n, k = img.shape
-    fig, ax = plt.subplots(figsize=(4.5 + 0.55 * k, 2.4 + 0.25 * n))
+    ylabels = [f"{mx.families[i]}: {mx.materials[i]}" for i in order]
+    xlabels = [mx.models[c] for c in cols]
+    y_room, x_room = (0.06 * max(map(len, lab), default=0) for lab in (ylabels, xlabels))
+    size = (1.9 + 0.55 * k + y_room, 1.1 + max(0.25 * n, 2.2) + 0.87 * x_room)
+    fig, ax = plt.subplots(figsize=size, layout="constrained")
     im = ax.imshow(img, cmap="viridis_r", aspect="auto", vmin=1, vmax=max(k, 2))
-    ax.set_xticks(range(k), [mx.models[c] for c in cols], rotation=60, ha="right", fontsize=8)
-    ax.set_yticks(range(n), [f"{mx.families[i]}: {mx.materials[i]}" for i in order], fontsize=7)
+    ax.set_xticks(range(k), xlabels, rotation=60, ha="right", rotation_mode="anchor", fontsize=8)
+    ax.set_yticks(range(n), ylabels, fontsize=7)
     fams = [mx.families[i] for i in order]
     for y in range(1, n):
         if fams[y] != fams[y - 1]:
             ax.axhline(y - 0.5, color="w", lw=2)
+    ok = np.ones_like(img, bool) if mx.converged is None else mx.converged[np.ix_(order, cols)]
+    unconverged = np.isfinite(mx.loss[np.ix_(order, cols)]) & ~ok
     if n * k <= 400:
         for y in range(n):
             for x in range(k):
                 c = "k" if img[y, x] <= (k + 1) / 2 else "w"
-                t = rank_text(img[y, x])
+                t = rank_text(img[y, x]) + ("*" if unconverged[y, x] else "")
                 ax.text(x, y, t, ha="center", va="center", fontsize=7, color=c)
     fig.colorbar(im, ax=ax, label="rank (1 = best)")
-    ax.set_title(f"rank by {mx.metric} per material")
-    fig.tight_layout()
+    note = "; * not converged" if unconverged.any() else ""
+    ax.set_title(f"rank by {mx.metric} per material{note}", fontsize=10)
     return fig

@@ -18,6 +18,47 @@ from brdffit.errors import MeasurementsError
 from brdffit.geometry import above_horizon, fold_phi_d, io_to_halfdiff
 
 
+@dataclass(frozen=True)
+class MaskCounts:
+    """Why samples of a :class:`Measurements` are invalid; each counted once, under the
+    first of these reasons that applies:
+
+    - ``below_horizon``: ``wi.z <= 0`` or ``wo.z <= 0`` (for a MERL table, at the bin
+      centre: about 24% of the cells by geometry alone);
+    - ``not_measured``: every channel negative (MERL's "not measured" mark; a non-finite
+      value is stored as -1, so an all-NaN sample counts here);
+    - ``negative_channel``: some channels negative, others not (bad data in one channel,
+      e.g. a measurement's blue channel);
+    - ``other``: masked by the reader or the caller for another reason (an extra mask).
+
+    ``n`` is the number of samples, valid or not.
+    """
+
+    n: int
+    below_horizon: int
+    not_measured: int
+    negative_channel: int
+    other: int
+
+    @property
+    def n_masked(self) -> int:
+        """Number of invalid samples."""
+        return self.below_horizon + self.not_measured + self.negative_channel + self.other
+
+    def text(self) -> str:
+        """One line: ``349,920 of 1,458,000 samples: 349,920 below the horizon, ...``."""
+        reasons = [
+            (self.below_horizon, "below the horizon"),
+            (self.not_measured, "not measured (every channel negative)"),
+            (self.negative_channel, "with a negative channel (the others not)"),
+            (self.other, "masked by the reader for another reason"),
+        ]
+        parts = [f"{k:,} {why}" for k, why in reasons if k]
+        if not parts:
+            return f"none of {self.n:,} samples"
+        return f"{self.n_masked:,} of {self.n:,} samples: {', '.join(parts)}"
+
+
 def readonly(a: np.ndarray) -> np.ndarray:
     """A C-contiguous, read-only view or copy of ``a``."""
     a = np.ascontiguousarray(a)
@@ -145,12 +186,24 @@ class Measurements:
         """A copy with some fields changed (the original is untouched)."""
         return dataclasses.replace(self, **changes)
 
+    def mask_counts(self) -> MaskCounts:
+        """Why the invalid samples are masked (:class:`MaskCounts`), from the fields alone."""
+        below = ~above_horizon(self.wi, self.wo)
+        negative = self.values < 0.0  # non-finite values are stored as -1
+        every = negative.all(axis=1) & ~below
+        some = negative.any(axis=1) & ~every & ~below
+        masked = ~self.valid
+        counts = [int(np.count_nonzero(masked & m)) for m in (below, every, some)]
+        return MaskCounts(self.n, *counts, int(np.count_nonzero(masked)) - sum(counts))
+
     def summary(self) -> str:
-        """A few lines for ``brdffit info``: size, validity, value range, provenance."""
+        """A few lines for ``brdffit info``: size, validity and why samples are masked,
+        value range, provenance."""
         v = self.values[self.valid]
         lines = [
             f"source          {self.source}",
             f"samples         {self.n} ({self.n_valid} valid, {self.n - self.n_valid} masked)",
+            f"masked          {self.mask_counts().text()}",
             f"grid            {self.grid if self.grid else 'scattered directions'}",
             f"channel scales  {', '.join(f'{s:.6g}' for s in self.channel_scales)}",
         ]

@@ -281,7 +281,9 @@ def read_merl(path: str | os.PathLike[str]) -> Measurements:
     Values are raw x :data:`MERL_SCALES` in 1/sr (no cosine). A cell is valid when no
     channel is negative ("not measured"; kept, never clamped) and both bin-centre
     directions are above the horizon. ``weights`` are the cells' solid angles (sr^2),
-    ``grid`` is ``MERL_SHAPE``, ``channel_scales`` the MERL scales.
+    ``grid`` is ``MERL_SHAPE``, ``channel_scales`` the MERL scales. How many cells are
+    masked and why (below the horizon, every channel negative, one channel negative):
+    :meth:`Measurements.mask_counts`, printed by ``brdffit info``.
 
     Arguments:
     - ``path``: the ``.binary`` file.

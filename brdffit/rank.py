@@ -10,8 +10,16 @@ column is the number to quote; AIC/BIC order models of similar error by complexi
 
 Ties: losses within a relative :data:`LOSS_RTOL` of each other are equal and share the
 average of the ranks they span (two models tied for first both get 1.5); AIC and BIC
-tie only when exactly equal. Unconverged fits (and NaN values) rank last, tied with
-each other.
+tie only when exactly equal.
+
+A fit that did not converge (``MAX_STEPS``) but has a finite loss is ranked by that
+loss and marked: its loss is one the model reached, so the model's best is at least
+that good, and ranking it last would hide a model that beat the others even unfinished.
+Only non-finite values (a failed fit) rank last, tied with each other.
+
+Losses: ``low_e1`` and ``low_e2`` are sums over samples; the table gives them per
+sample beside the sum (:func:`brdffit.result.per_sample`), the number to compare
+between fits on different sub-grids.
 """
 
 from __future__ import annotations
@@ -22,7 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from brdffit.errors import ParameterError
-from brdffit.result import FitResult
+from brdffit.result import FitResult, loss_kind
 from brdffit.tables import render
 
 LOSS_RTOL = 1e-5
@@ -40,8 +48,15 @@ rank by.
 """
 
 TIES = (
-    f"Losses within a relative {LOSS_RTOL:g} tie and share their average rank; unconverged "
-    "fits rank last."
+    f"Losses within a relative {LOSS_RTOL:g} tie and share their average rank; a fit that "
+    "did not converge is ranked by the loss it reached and marked, a failed fit (no finite "
+    "loss) ranks last."
+)
+
+PER_SAMPLE = (
+    "low_e1 and low_e2 are sums over the samples; 'per sample' divides them by the sample "
+    "count (ngan, an RMS, and log1p_l1, a mean, are per sample already): compare fits on "
+    "different sub-grids by it."
 )
 
 NOTE = (
@@ -52,7 +67,8 @@ NOTE = (
 
 @dataclass(frozen=True)
 class RankRow:
-    """One model's line: name and options, loss, AIC/BIC and their deltas, ranks.
+    """One model's line: name and options, loss (as the metric defines it, and per
+    sample), AIC/BIC and their deltas, ranks, status (:class:`brdffit.Status` name).
 
     Ranks are 1-based and tied values share their average (module docstring), so a
     rank may be fractional (2.5).
@@ -71,6 +87,8 @@ class RankRow:
     n_free: int
     converged: bool
     wall_time: float
+    loss_per_sample: float = float("nan")
+    status: str = "CONVERGED"
 
 
 @dataclass(frozen=True)
@@ -89,7 +107,8 @@ class Ranking:
             "rank",
             "model",
             "options",
-            self.metric,
+            f"{self.metric} ({loss_kind(self.metric)})",
+            f"{self.metric} per sample",
             "AIC",
             "dAIC",
             "BIC",
@@ -104,12 +123,13 @@ class Ranking:
                 r.model,
                 r.options or "-",
                 f"{r.loss:.6g}",
+                f"{r.loss_per_sample:.6g}",
                 f"{r.aic:.6g}",
                 f"{r.delta_aic:.1f}",
                 f"{r.bic:.6g}",
                 f"{r.delta_bic:.1f}",
                 str(r.n_free),
-                "yes" if r.converged else "NO",
+                "yes" if r.converged else f"NO ({r.status})",
                 f"{r.wall_time:.2f}",
             ]
             for r in self.rows
@@ -119,8 +139,8 @@ class Ranking:
             return table
         title = f"Ranking by {self.by} on {self.source} (metric {self.metric}, n = {self.n_data})"
         if fmt == "markdown":
-            return f"**{title}**\n\n{table}\n_{TIES} {NOTE}_"
-        return f"{title}\n{table}{TIES}\n{NOTE}"
+            return f"**{title}**\n\n{table}\n_{TIES} {PER_SAMPLE} {NOTE}_"
+        return f"{title}\n{table}{TIES}\n{PER_SAMPLE}\n{NOTE}"
 
     def to_dict(self) -> dict:
         """JSON-ready form."""
@@ -180,8 +200,8 @@ def rank(results: Sequence[FitResult], *, by: str = "loss") -> Ranking:
     Arguments:
     - ``results``: :class:`FitResult` of one data set, one metric, any models.
     - ``by``: ``"loss"`` (the metric), ``"aic"`` or ``"bic"``; rows are sorted by it.
-      Unconverged fits keep their numbers but are ranked last; ties as in the
-      module docstring, tied rows in the order given.
+      A fit that did not converge is ranked by its finite values and marked; non-finite
+      values rank last; ties as in the module docstring, tied rows in the order given.
 
     Raises :class:`ParameterError` if the results mix metrics or data sets.
     """
@@ -196,11 +216,9 @@ def rank(results: Sequence[FitResult], *, by: str = "loss") -> Ranking:
             f"rank compares fits of one data set under one metric; got metrics "
             f"{sorted(metrics)} and data {sorted(data)}"
         )
-    ok = np.array([r.converged for r in results])
 
     def col(name: str) -> np.ndarray:
-        v = np.array([getattr(r, name) for r in results], float)
-        return np.where(ok, v, np.nan)
+        return np.array([getattr(r, name) for r in results], float)
 
     loss, aic, bic = col("loss"), col("aic"), col("bic")
     rk = {"loss": ranks(loss, LOSS_RTOL), "aic": ranks(aic), "bic": ranks(bic)}
@@ -211,17 +229,25 @@ def rank(results: Sequence[FitResult], *, by: str = "loss") -> Ranking:
             loss=r.loss,
             aic=r.aic,
             bic=r.bic,
-            delta_aic=r.aic - np.nanmin(aic) if ok.any() else float("nan"),
-            delta_bic=r.bic - np.nanmin(bic) if ok.any() else float("nan"),
+            delta_aic=_delta(r.aic, aic),
+            delta_bic=_delta(r.bic, bic),
             rank_loss=float(rk["loss"][i]),
             rank_aic=float(rk["aic"][i]),
             rank_bic=float(rk["bic"][i]),
             n_free=r.n_free,
             converged=r.converged,
             wall_time=r.wall_time,
+            loss_per_sample=r.loss_per_sample,
+            status=r.status.name,
         )
         for i, r in enumerate(results)
     ]
     rows.sort(key=lambda row: getattr(row, f"rank_{by}"))
     first = results[0]
     return Ranking(first.metric, first.source, first.n_data, by, tuple(rows))
+
+
+def _delta(value: float, column: np.ndarray) -> float:
+    """``value`` minus the smallest finite value of ``column`` (NaN if there is none)."""
+    finite = column[np.isfinite(column)]
+    return float(value - finite.min()) if finite.size else float("nan")

@@ -5,6 +5,8 @@ per metric, the CSV tables (``aggregate_<metric>.csv``, ``per_material_<metric>.
 ``pareto_<metric>.csv``, ``families_<metric>.csv``) and the figures
 (``rank_matrix_<metric>.png``, ``pareto_<metric>.png``). The text holds no date and no
 absolute path and the bootstrap is seeded, so the same JSON files give the same report.
+Material families come from a user's ``material,family`` CSV file when one is given
+(:func:`brdffit.families.read_families`), else from the sweep's manifest.
 """
 
 from __future__ import annotations
@@ -23,10 +25,14 @@ from brdffit.crossrank import (
     per_material_table,
     rank_matrix_figure,
 )
-from brdffit.pareto import error_vs_time, pareto_figure, pareto_table
-from brdffit.rank import LOSS_RTOL, NOTE
+from brdffit.families import read_families
+from brdffit.pareto import error_vs_time, pareto_caption, pareto_figure, pareto_table
+from brdffit.rank import LOSS_RTOL, NOTE, PER_SAMPLE
 
 MAX_INLINE_ROWS = 200
+
+SAVE = {"dpi": 90, "bbox_inches": "tight", "pad_inches": 0.1}
+"""How the report's figures are saved: the canvas grows to hold every label."""
 
 
 def _header(res) -> list[str]:
@@ -51,7 +57,9 @@ def _header(res) -> list[str]:
         f"- results: {done} of {total} tasks, {unconv} not converged, {len(res.errors)} errors",
         *_provenance(res),
         "",
-        "Ranks are by the metric value per material; unconverged and missing fits rank last. "
+        "Ranks are by the metric value per material. A fit that did not converge is ranked "
+        "by the loss it reached (the model does at least that well) and marked: 'no' in "
+        "the converged column, * in the rank matrix; failed and missing fits rank last. "
         f"Losses within a relative {LOSS_RTOL:g} of each other tie and share their average "
         "rank (nested models converge to the same fit from different sides); a tie for "
         "first counts as a win for each tied model. A model with non-default options is "
@@ -62,7 +70,7 @@ def _header(res) -> list[str]:
         "percentile bootstrap over materials (1000 resamples, seed 0). Fit times are the "
         "median over materials of each fit's wall time in its worker (compile included on "
         "a worker's first fit); evaluation cost is the best of 3 warm jitted evaluations, "
-        "ns per sample.",
+        "ns per sample. " + PER_SAMPLE,
         "",
     ]
 
@@ -89,18 +97,27 @@ def _errors(res) -> list[str]:
     return lines + [""]
 
 
-def write_report(sweep_dir: str | os.PathLike[str], *, n_boot: int = 1000, seed: int = 0) -> Path:
+def write_report(
+    sweep_dir: str | os.PathLike[str],
+    *,
+    n_boot: int = 1000,
+    seed: int = 0,
+    families: str | os.PathLike[str] | None = None,
+) -> Path:
     """Write the report of the sweep in ``sweep_dir``; returns the path of ``report.md``.
 
-    ``n_boot`` and ``seed`` set the bootstrap of :func:`brdffit.crossrank.aggregate`.
-    Raises :class:`brdffit.errors.SweepError` if the folder holds no ``sweep.json``.
+    ``n_boot`` and ``seed`` set the bootstrap of :func:`brdffit.crossrank.aggregate`;
+    ``families`` is a ``material,family`` CSV file whose families replace the recorded
+    ones. Raises :class:`brdffit.errors.SweepError` if the folder holds no
+    ``sweep.json`` or the families file is not usable. Figures are saved with a tight
+    bounding box, so no label is cut off.
     """
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    res = load_sweep(sweep_dir)
+    res = load_sweep(sweep_dir, read_families(families) if families else None)
     out = Path(sweep_dir) / "report"
     out.mkdir(parents=True, exist_ok=True)
     lines = _header(res)
@@ -113,10 +130,10 @@ def write_report(sweep_dir: str | os.PathLike[str], *, n_boot: int = 1000, seed:
         write_text(out / f"pareto_{metric}.csv", pareto_table(par, "csv"))
         write_text(out / f"families_{metric}.csv", family_table(mx, "csv"))
         fig = rank_matrix_figure(mx, agg)
-        save_figure(fig, out / f"rank_matrix_{metric}.png", dpi=90)
+        save_figure(fig, out / f"rank_matrix_{metric}.png", **SAVE)
         plt.close(fig)
         fig = pareto_figure(par)
-        save_figure(fig, out / f"pareto_{metric}.png", dpi=90)
+        save_figure(fig, out / f"pareto_{metric}.png", **SAVE)
         plt.close(fig)
         lines += [
             f"## Metric `{metric}`",
@@ -130,6 +147,8 @@ def write_report(sweep_dir: str | os.PathLike[str], *, n_boot: int = 1000, seed:
             "",
             family_table(mx),
             "### Fit error against run time",
+            "",
+            f"Over which materials: {pareto_caption(par)}.",
             "",
             pareto_table(par),
             f"![Pareto plot](pareto_{metric}.png)",

@@ -28,6 +28,7 @@ Workers are processes started with the ``spawn`` method (JAX is not fork-safe);
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import json
 import os
@@ -174,6 +175,12 @@ def synthetic_materials(n: int, *, seed: int = 0, noise_mult: float = 0.03) -> l
     return out
 
 
+def with_families(materials: Sequence[Material], families: dict[str, str]) -> list[Material]:
+    """``materials`` with the families of ``families`` (material -> family, e.g. from
+    :func:`brdffit.families.read_families`) replacing the guessed ones it names."""
+    return [dataclasses.replace(m, family=families.get(m.name, m.family)) for m in materials]
+
+
 def load_material(material: Material, stride: tuple[int, int, int]):
     """The :class:`Measurements` of ``material`` on the MERL grid of ``stride``."""
     if material.kind == "synthetic":
@@ -297,7 +304,8 @@ def run_task(task: Task, out: str) -> dict:
             throw=False,
         )
         d = json.loads(r.to_json())
-        ns = eval_cost(model, r.params, data, n=s["eval_n"]) if r.converged else None
+        ok = bool(np.isfinite(r.loss))  # an unconverged fit is ranked by its loss: time it too
+        ns = eval_cost(model, r.params, data, n=s["eval_n"]) if ok else None
         d.update(
             label=task.model,
             material=task.material.name,

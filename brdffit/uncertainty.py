@@ -43,7 +43,7 @@ from brdffit import objective as objective_mod
 from brdffit.metrics import Prepared
 from brdffit.objective import Objective
 from brdffit.parameters import ParameterLayout, Params
-from brdffit.result import FitResult, Status
+from brdffit.result import AT_BOUND_ATOL, AT_BOUND_RTOL, FitResult, Status
 
 NULL_EIGEN = 1e-10
 """Eigenvalue of the column-scaled ``J^T J``, relative to the largest, under which its
@@ -202,6 +202,7 @@ def assemble(
         stderr = {k: np.asarray(v) for k, v in layout.split(jnp.asarray(sd)).items()}
         stderr.update({k: np.zeros(np.shape(v)) for k, v in obj.frozen.items()})
         stderr = {p.name: stderr[p.name] for p in model.parameters}
+        weak_names += [lab for lab in unidentified(layout, params, sd) if lab not in weak_names]
 
     k = layout.size + 1  # + the noise variance
     finite = math.isfinite(rss)
@@ -291,18 +292,54 @@ def _warnings(at_bound, reason, status, cond, weak_names) -> tuple[str, ...]:
         out.append(
             f"J^T J is ill-conditioned ({cond:.3g}): poorly identified{named or ' (none named)'}"
         )
+    elif weak_names:
+        out.append(
+            f"not identified by the data: {', '.join(weak_names)}; the standard error exceeds "
+            "the range the bounds allow (for a scale fitted in ln x: the value itself), so "
+            "the value is arbitrary: freeze it or leave its feature out (brdffit simplify)"
+        )
     return tuple(out)
+
+
+def unidentified(
+    layout: ParameterLayout, params: dict[str, np.ndarray], sd: np.ndarray
+) -> list[str]:
+    """Labels of the free scalars whose standard error ``sd`` exceeds their width.
+
+    The width is the span of the bounds, or ``|x|`` for a scale the solver fits in
+    ``ln x`` (:attr:`~brdffit.parameters.Parameter.solver_log`) or a half-open range: a
+    one-sigma interval wider than every value the model allows (for a scale: a relative
+    error over 100%, not even the order of magnitude known) means the data do not pin
+    the scalar down. This is the test the near-null rule of :func:`covariance` cannot
+    make: it looks at ``J^T J`` scaled by its own columns, which hides a scalar whose
+    column is tiny but not zero (a tint of a lobe whose weight sits at 4e-18), while
+    its variance, ``1 / |J_j|^2`` times a well-conditioned factor, explodes (errors of
+    1e15 on a [0, 1] tint). Identified scalars have errors orders of magnitude below
+    their width, so the threshold 1 needs no tuning. ``sd`` NaN (held on a bound) is
+    left to the at-bound flag.
+    """
+    lo, hi = layout.bounds_flat()
+    x = _free_values(layout, params)
+    span = np.isfinite(lo) & np.isfinite(hi) & ~layout.solver_log_mask()
+    with np.errstate(invalid="ignore"):
+        width = np.where(span, hi - lo, np.abs(x))
+        bad = np.isfinite(sd) & (sd > width)
+    return [lab for lab, b in zip(layout.labels(), bad, strict=True) if b]
+
+
+def _free_values(layout: ParameterLayout, params: dict[str, np.ndarray]) -> np.ndarray:
+    """The free scalars of ``params`` (natural units) in the order of ``layout.labels()``."""
+    flat = [np.ravel(np.asarray(params[p.name], float)) for p in layout.free]
+    return np.concatenate(flat) if flat else np.zeros(0)
 
 
 def _at_bound(
     layout: ParameterLayout, params: dict[str, np.ndarray], binding: np.ndarray
 ) -> tuple[str, ...]:
-    """Names of free parameters within 1e-6 of a bound or held on it by the active set."""
-    held = {lab.split("[")[0] for lab, b in zip(layout.labels(), binding, strict=True) if b}
-    return tuple(
-        p.name
-        for p in layout.free
-        if p.name in held
-        or np.any(np.isclose(params[p.name], p.bounds[0], rtol=1e-6, atol=1e-9))
-        or np.any(np.isclose(params[p.name], p.bounds[1], rtol=1e-6, atol=1e-9))
-    )
+    """Labels of the free scalars (``kd[b]``, ``alpha``) within :data:`AT_BOUND_RTOL` /
+    :data:`AT_BOUND_ATOL` of a bound, or held on it by the active set."""
+    lo, hi = layout.bounds_flat()
+    x = _free_values(layout, params)
+    tol = dict(rtol=AT_BOUND_RTOL, atol=AT_BOUND_ATOL)
+    near = np.asarray(binding, bool) | np.isclose(x, lo, **tol) | np.isclose(x, hi, **tol)
+    return tuple(lab for lab, n in zip(layout.labels(), near, strict=True) if n)

@@ -167,3 +167,19 @@ def test_simplify_prints_the_path_and_the_chosen_label(capsys, merl_file, tmp_pa
         )
     err = capsys.readouterr()[1]
     assert exit_info.value.code == 2 and len(err.strip().splitlines()) == 1 and "aic" in err
+
+
+def test_sample_says_what_it_does_and_shows_each_warning_once(capsys, merl_file):
+    argv = ["sample", merl_file, "--model", "lambert", "--stride", "15", "15", "15"]
+    # 30 steps are far too short: the chain-too-short warning must come, once, cleanly
+    # (pytest turns a Python warning into an error, so one escaping the CLI fails here)
+    code, out, err = _run(capsys, *argv, "--steps", "30", "--subsample", "200", "--no-progress")
+    assert code == 0, err
+    lines = err.splitlines()
+    assert lines[0].startswith("fitting lambert to") and "Levenberg-Marquardt" in lines[0]
+    assert out.index("[[Fit]] lambert") < out.index("[[Parameters]]") < out.index("[[Posterior]]")
+    needle = "autocorrelation times"
+    assert (out + err).count(needle) == 1, (out, err)
+    warning = next(x for x in lines if needle in x)
+    assert warning.startswith("brdffit sample: warning: chain of")
+    assert "Warning" not in err and "cli.py" not in err  # no raw Python warning

@@ -46,11 +46,12 @@ def test_per_material_ranks_and_relative_error(tmp_path):
     by = dict(zip(mx.materials, mx.rank.tolist(), strict=True))
     assert by["gold-metallic-paint"] == [1, 2]
     assert by["red-plastic"] == [2, 1]
-    assert by["blue-fabric"] == [1, 2]  # b did not converge: ranked last, no loss
+    assert by["blue-fabric"] == [1, 2]  # b did not converge: ranked by its loss 9 > 2
     i = mx.materials.index("red-plastic")
     assert mx.rel[i, 0] == pytest.approx(3.0 / 1.5 - 1)
     assert mx.rel[i, 1] == 0
-    assert np.isnan(mx.loss[mx.materials.index("blue-fabric"), 1])
+    i = mx.materials.index("blue-fabric")
+    assert mx.loss[i, 1] == 9.0 and not mx.converged[i, 1] and mx.converged[i, 0]
 
 
 def test_aggregate_with_bootstrap(tmp_path):
@@ -89,14 +90,16 @@ def test_pareto_front_function():
 
 
 def test_error_vs_time(tmp_path):
-    rows = error_vs_time(load_sweep(make_sweep(tmp_path)), "low_e2")
+    # b stopped unconverged on blue-fabric at loss 1.0: counted with it, as in the ranking
+    table = {**TABLE, "blue-fabric": {"a": (2.0, 0.5, 10.0, True), "b": (1.0, 0.2, 5.0, False)}}
+    rows = error_vs_time(load_sweep(make_sweep(tmp_path, table=table)), "low_e2")
     by = {r.model: r for r in rows}
     assert by["a"].median_loss == pytest.approx(np.median([1.0, 3.0, 0.5, 2.0]))
-    assert by["b"].n_materials == 3  # one unconverged fit left out
+    assert by["b"].median_loss == pytest.approx(np.median([2.0, 1.5, 0.6, 1.0]))
+    assert by["b"].n_materials == 4 and by["b"].n_common == 4
     assert by["b"].median_wall_time == pytest.approx(0.2)
     assert by["a"].median_eval_ns == 10.0
-    # equal median error (1.5), b faster and cheaper: a is dominated on both fronts
-    assert by["b"].median_loss == pytest.approx(by["a"].median_loss)
+    # b: lower median error (1.25 < 1.5), faster and cheaper: a is dominated on both fronts
     assert by["b"].front_time and by["b"].front_eval
     assert not by["a"].front_time and not by["a"].front_eval
     assert pareto_table(rows).count("*") == 2
@@ -111,7 +114,8 @@ def test_not_a_sweep_folder(tmp_path):
 
 def test_near_equal_losses_tie_and_a_shared_first_is_a_win_for_each(tmp_path):
     # steel: b is a nested model stopped 3e-6 relative above a (inside LOSS_RTOL = 1e-5);
-    # gray-rubber: nothing converged, both last and tied, no win for anyone.
+    # gray-rubber: neither converged; both ranked by the equal losses they reached, a
+    # shared first place and a win for each.
     table = dict(TABLE)
     table["steel"] = {"a": (0.5, 0.4, 10.0, True), "b": (0.5 * (1 + 3e-6), 0.3, 5.0, True)}
     table["gray-rubber"] = {"a": (1.0, 0.4, 10.0, False), "b": (1.0, 0.3, 5.0, False)}
@@ -122,11 +126,12 @@ def test_near_equal_losses_tie_and_a_shared_first_is_a_win_for_each(tmp_path):
     i = mx.materials.index("steel")
     assert mx.rank_aic[i].tolist() == [1, 2]  # AIC ties only when equal; b has 4 more params
     rows = {r.model: r for r in aggregate(mx, n_boot=200)}
-    assert (rows["a"].wins, rows["b"].wins) == (3, 2)  # steel counts for both
+    assert (rows["a"].wins, rows["b"].wins) == (4, 3)  # steel and gray-rubber count for both
+    assert (rows["a"].n_unconverged, rows["b"].n_unconverged) == (1, 2)
     assert rows["a"].mean_rank == pytest.approx((1 + 2 + 1.5 + 1 + 1.5) / 5)
     assert rows["b"].mean_rank == pytest.approx((2 + 1 + 1.5 + 2 + 1.5) / 5)
     csv = [line.split(",") for line in per_material_table(mx, "csv").splitlines()]
-    assert [row[6] for row in csv if row[0] == "steel"] == ["1.5", "1.5"]  # rank column
+    assert [row[7] for row in csv if row[0] == "steel"] == ["1.5", "1.5"]  # rank column
 
 
 # material -> losses of models a, b, c, d (the losses are also the ranks)

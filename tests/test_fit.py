@@ -100,7 +100,7 @@ def test_best_fit_on_a_bound_is_held_there_and_flagged():
     bright = synthesize(lam, {"kd": 1.0}, grid="random", n=3000, seed=0)
     data = Measurements.from_directions(bright.wi, bright.wo, bright.values * 1.5)
     r = fit(lam, data, "low_e2", n_restarts=0)
-    assert r.converged and r.at_bound == ("kd",)
+    assert r.converged and r.at_bound == ("kd[r]", "kd[g]", "kd[b]")  # per channel
     np.testing.assert_allclose(r.params["kd"], 1.0, rtol=1e-6)
     assert any("bound" in w for w in r.warnings)
 
@@ -180,7 +180,8 @@ def test_an_albedo_whose_optimum_is_zero_lands_on_its_bound_without_a_crawl(walt
     data = synthesize(walter, truth, stride=GRID)
     for metric in ("low_e2", "ngan"):
         r = fit(walter, data, metric, n_restarts=0, screen=0)  # the one start's descent
-        assert r.converged and "kd" in r.at_bound and r.n_steps <= 64, (metric, r.n_steps)
+        assert r.converged and r.n_steps <= 64, (metric, r.n_steps)
+        assert "kd[r]" in r.at_bound and "kd[g]" not in r.at_bound  # only the channel at 0
         np.testing.assert_allclose(r.params["kd"], truth["kd"], atol=1e-9)
         np.testing.assert_allclose(r.params["alpha"], 0.15, rtol=1e-6)
 
@@ -205,7 +206,7 @@ def test_an_optimum_on_the_upper_bound_is_reached_without_a_crawl():
     data = synthesize(on, truth, grid="random", n=2000, seed=3)
     r = fit(on, data, "low_e2", init=truth, n_restarts=0, screen=0)
     assert r.converged and r.n_steps <= 128, (r.status, r.n_steps)
-    assert set(r.at_bound) == {"rho"}
+    assert set(r.at_bound) == {"rho[r]", "rho[b]"}  # rho[g] = 0.4857 is inside
     np.testing.assert_allclose(r.params["rho"], truth["rho"], atol=1e-9)
     np.testing.assert_allclose(r.params["sigma"], truth["sigma"], rtol=1e-6)
 

@@ -75,19 +75,24 @@ def test_a_nested_model_at_its_boundary_ties_with_the_smaller_one(results):
     # Oren-Nayar converged to its Lambert special case: loss 2e-6 relative above Lambert
     nested = replace(lambert, model="oren_nayar", options={}, loss=lambert.loss * (1 + 2e-6))
     worse = replace(lambert, model="phong", options={}, loss=lambert.loss * (1 + 1e-3))
-    stuck = replace(walter, status=Status.MAX_STEPS, loss=0.0)
-    r = rank([worse, nested, lambert, walter, stuck])
-    by = {(row.model, row.converged): row.rank_loss for row in r.rows}
+    # stopped at max_steps 1e-3 above walter: ranked by the loss it reached, and marked
+    stuck = replace(walter, model="ward", status=Status.MAX_STEPS, loss=walter.loss * 1.001)
+    nan = float("nan")
+    failed = replace(walter, model="kurt", status=Status.NONFINITE, loss=nan, aic=nan, bic=nan)
+    r = rank([worse, failed, nested, lambert, walter, stuck])
+    by = {row.model: row.rank_loss for row in r.rows}
     assert by == {
-        ("walter", True): 1,
-        ("oren_nayar", True): 2.5,
-        ("lambert", True): 2.5,
-        ("phong", True): 4,
-        ("walter", False): 5,  # unconverged: last whatever its loss
+        "walter": 1,
+        "ward": 2,  # not converged, finite loss
+        "oren_nayar": 3.5,
+        "lambert": 3.5,
+        "phong": 5,
+        "kurt": 6,  # no finite loss: last
     }
-    assert [row.model for row in r.rows[1:3]] == ["oren_nayar", "lambert"]  # given order
+    assert [row.model for row in r.rows[2:4]] == ["oren_nayar", "lambert"]  # given order
     text = r.table()
-    assert "\n2.5 " in text and "share their average rank" in text
+    assert "\n3.5 " in text and "share their average rank" in text
+    assert "NO (MAX_STEPS)" in text and "NO (NONFINITE)" in text
 
 
 def test_options_column_shows_the_changed_options_of_the_label(results):
