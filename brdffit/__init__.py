@@ -1,6 +1,7 @@
 """brdffit: fit analytic BRDF models to measured reflectance.
 
 Public API (everything else may change): :func:`read_merl`, :func:`write_merl`,
+:func:`read_table`, :func:`read_rgl`, :func:`read_rgl_at`,
 :func:`synthesize`, :func:`fit`, :func:`fit_many`, :func:`sample`, :func:`rank`,
 :func:`simplify`, :class:`Measurements`, :class:`FitResult`, :class:`Posterior`,
 :class:`Reduction`, :mod:`brdffit.models` and the error types.
@@ -44,6 +45,7 @@ from brdffit.errors import (  # noqa: E402
     FitError,
     MeasurementFileError,
     MeasurementsError,
+    MissingDependencyError,
     ParameterError,
 )
 from brdffit.fit import fit, fit_many  # noqa: E402
@@ -51,9 +53,11 @@ from brdffit.measurements import Measurements  # noqa: E402
 from brdffit.merl import read_merl, write_merl  # noqa: E402
 from brdffit.rank import Ranking, rank  # noqa: E402
 from brdffit.result import FitResult, Status  # noqa: E402
+from brdffit.rgl import read_rgl, read_rgl_at  # noqa: E402
 from brdffit.sample import Posterior, sample  # noqa: E402
 from brdffit.simplify import Reduction, simplify  # noqa: E402
 from brdffit.synthetic import synthesize  # noqa: E402
+from brdffit.table import read_table  # noqa: E402
 
 __all__ = [
     "enable_compilation_cache",
@@ -66,6 +70,9 @@ __all__ = [
     "fit_many",
     "rank",
     "read_merl",
+    "read_rgl",
+    "read_rgl_at",
+    "read_table",
     "sample",
     "simplify",
     "synthesize",
@@ -75,6 +82,7 @@ __all__ = [
     "FitError",
     "MeasurementFileError",
     "MeasurementsError",
+    "MissingDependencyError",
     "Measurements",
     "ParameterError",
     "models",

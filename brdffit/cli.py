@@ -182,6 +182,10 @@ def cmd_sweep(args) -> None:
         materials = sweep.merl_materials(args.merl_dir, names)
     elif args.nbrdf_dir:
         materials = sweep.nbrdf_materials(args.nbrdf_dir, names)
+    elif args.rgl_dir:
+        materials = sweep.rgl_materials(args.rgl_dir, names)
+    elif args.table_dir:
+        materials = sweep.table_materials(args.table_dir, names)
     else:
         materials = sweep.synthetic_materials(args.synthetic, seed=args.seed)
     if args.families:
@@ -274,7 +278,11 @@ def build_parser() -> argparse.ArgumentParser:
     sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
 
     def data_args(sp):
-        sp.add_argument("file", help="MERL binary, or NBRDF .json/.h5")
+        sp.add_argument(
+            "file",
+            help="measurements: MERL binary, NBRDF .json/.h5, RGL-EPFL .bsdf (needs "
+            "brdffit[rgl]), or a table of samples .csv/.npz (columns: brdffit.table)",
+        )
         _stride_arg(sp)
 
     def fit_args(sp, with_model=True):
@@ -349,6 +357,10 @@ def build_parser() -> argparse.ArgumentParser:
     src = s.add_mutually_exclusive_group(required=True)
     src.add_argument("--merl-dir", metavar="DIR", help="folder of MERL *.binary files")
     src.add_argument("--nbrdf-dir", metavar="DIR", help="folder of NBRDF *.json + *.h5")
+    src.add_argument("--rgl-dir", metavar="DIR", help="folder of RGL-EPFL *.bsdf files")
+    src.add_argument(
+        "--table-dir", metavar="DIR", help="folder of sample tables *.csv/*.npz (read as they are)"
+    )
     src.add_argument("--synthetic", type=int, metavar="N", help="N seeded synthetic materials")
     s.add_argument("--materials", help="comma-separated material names to pick")
     s.add_argument("--models", required=True, help=MODELS_HELP)

@@ -45,3 +45,7 @@ class ChainTooShortError(BrdffitError, RuntimeError):
 
 class SweepError(BrdffitError, ValueError):
     """A sweep folder, material source or sweep setting is not usable; the message names it."""
+
+
+class MissingDependencyError(BrdffitError, ImportError):
+    """An optional dependency is not installed; the message names the extra to install."""

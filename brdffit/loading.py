@@ -1,9 +1,11 @@
-"""Open a measurement file by its kind: a MERL binary or an NBRDF network.
+"""Open a measurement file by its kind, picked by its suffix.
 
-``load_measurements(path)`` reads a MERL binary (any name), or evaluates an NBRDF
-network (``<name>.json`` with ``<name>.h5`` beside it, either path given) on the MERL
-grid. ``stride`` keeps a strided sub-grid (odd divisors of 90, 90, 180), which makes
-fits several times faster at the price of resolution.
+``load_measurements(path)`` reads a MERL binary (any other name), evaluates an NBRDF
+network (``<name>.json`` with ``<name>.h5`` beside it, either path given) or an RGL-EPFL
+``.bsdf`` file (:mod:`brdffit.rgl`, needs Mitsuba 3) on the MERL grid, or reads a table
+of samples, ``.csv`` or ``.npz`` (:mod:`brdffit.table`). ``stride`` keeps a strided
+sub-grid (odd divisors of 90, 90, 180), which makes fits several times faster at the
+price of resolution; a table is read as it is (``stride`` must be 1).
 """
 
 from __future__ import annotations
@@ -11,7 +13,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from brdffit.errors import MeasurementFileError
+from brdffit.errors import MeasurementFileError, ParameterError
 from brdffit.measurements import Measurements
 from brdffit.merl import merl_subgrid, read_merl
 
@@ -19,11 +21,28 @@ from brdffit.merl import merl_subgrid, read_merl
 def load_measurements(
     path: str | os.PathLike[str], *, stride: tuple[int, int, int] | int = 1
 ) -> Measurements:
-    """Measurements from ``path`` (MERL binary or NBRDF .json/.h5), on the (strided) MERL grid.
+    """Measurements from ``path``: MERL binary, NBRDF .json/.h5, RGL .bsdf, or .csv/.npz table.
 
-    Raises :class:`MeasurementFileError` naming the file when it cannot be read.
+    Grid sources are evaluated on the (strided) MERL grid; a table keeps its samples.
+
+    Raises :class:`MeasurementFileError` naming the file when it cannot be read, and
+    :class:`~brdffit.errors.ParameterError` for a stride other than 1 on a table.
     """
     p = Path(path)
+    suffix = p.suffix.lower()
+    if suffix in (".csv", ".npz"):
+        from brdffit.table import read_table
+
+        if stride not in (1, (1, 1, 1)):
+            raise ParameterError(
+                f"stride {stride} for {p}: a table of samples is read as it is; "
+                "stride applies to MERL-grid sources (MERL, NBRDF, RGL .bsdf)"
+            )
+        return read_table(p)
+    if suffix == ".bsdf":
+        from brdffit.rgl import read_rgl
+
+        return read_rgl(p, stride=stride)
     if p.suffix in (".json", ".h5"):
         from brdffit.nbrdf import read_nbrdf
 

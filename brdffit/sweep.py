@@ -61,8 +61,8 @@ _SYNTH = (
 class Material:
     """One material of a sweep.
 
-    ``kind`` is ``"merl"``, ``"nbrdf"`` (``path`` the file) or ``"synthetic"``
-    (``spec``: generating model, parameters, noise and seed).
+    ``kind`` is ``"merl"``, ``"nbrdf"``, ``"rgl"``, ``"table"`` (``path`` the file) or
+    ``"synthetic"`` (``spec``: generating model, parameters, noise and seed).
     """
 
     name: str
@@ -112,11 +112,18 @@ class SweepSummary:
     wall_time: float
 
 
-def _folder_materials(folder: str | os.PathLike[str], kind: str, pattern: str, names):
+def _folder_materials(
+    folder: str | os.PathLike[str], kind: str, pattern: str | tuple[str, ...], names
+):
     d = Path(folder)
     if not d.is_dir():
         raise SweepError(f"{d}: not a folder of {kind} files")
-    found = {p.stem: p for p in sorted(d.glob(pattern))}
+    patterns = (pattern,) if isinstance(pattern, str) else pattern
+    files = [p for pat in patterns for p in sorted(d.glob(pat))]
+    found = {p.stem: p for p in files}
+    if len(found) < len(files):
+        raise SweepError(f"{d}: two {kind} files share a name stem; rename one")
+    pattern = " or ".join(patterns)
     if names:
         missing = [n for n in names if n not in found]
         if missing:
@@ -135,6 +142,17 @@ def merl_materials(folder: str | os.PathLike[str], names: Sequence[str] | None =
 def nbrdf_materials(folder: str | os.PathLike[str], names: Sequence[str] | None = None):
     """Materials from the NBRDF networks (``*.json`` + ``*.h5``) of ``folder``."""
     return _folder_materials(folder, "nbrdf", "*.json", names)
+
+
+def rgl_materials(folder: str | os.PathLike[str], names: Sequence[str] | None = None):
+    """Materials from the RGL-EPFL ``*.bsdf`` files of ``folder`` (:mod:`brdffit.rgl`)."""
+    return _folder_materials(folder, "rgl", "*.bsdf", names)
+
+
+def table_materials(folder: str | os.PathLike[str], names: Sequence[str] | None = None):
+    """Materials from the sample tables (``*.csv``, ``*.npz``; :mod:`brdffit.table`) of
+    ``folder``; a table is fitted as it is, whatever the sweep's ``stride``."""
+    return _folder_materials(folder, "table", ("*.csv", "*.npz"), names)
 
 
 def synthetic_materials(n: int, *, seed: int = 0, noise_mult: float = 0.03) -> list[Material]:
@@ -198,7 +216,7 @@ def load_material(material: Material, stride: tuple[int, int, int]):
         )
     from brdffit.loading import load_measurements
 
-    return load_measurements(material.path, stride=stride)
+    return load_measurements(material.path, stride=1 if material.kind == "table" else stride)
 
 
 _CACHE: dict = {}
@@ -384,11 +402,11 @@ def run_sweep(
     """Fit every (material, model, metric) not yet finished in folder ``out``.
 
     Arguments:
-    - ``materials``: from :func:`merl_materials`, :func:`nbrdf_materials` or
-      :func:`synthetic_materials`; ``models``: model specs, ``name`` or
-      ``name[k=v,...]`` (:func:`brdffit.models.parse_spec`; each variant is fitted and
-      ranked as a model of its own, specs of the same model counted once); ``metrics``:
-      metric names.
+    - ``materials``: from :func:`merl_materials`, :func:`nbrdf_materials`,
+      :func:`rgl_materials`, :func:`table_materials` or :func:`synthetic_materials`;
+      ``models``: model specs, ``name`` or ``name[k=v,...]``
+      (:func:`brdffit.models.parse_spec`; each variant is fitted and ranked as a model of
+      its own, specs of the same model counted once); ``metrics``: metric names.
     - ``stride``, ``cut_deg``, ``n_restarts``, ``screen``, ``seed``, ``max_steps``: as in
       :func:`brdffit.fit` and :func:`brdffit.loading.load_measurements`; a resumed
       sweep must use the same values (else :class:`SweepError`).
