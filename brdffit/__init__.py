@@ -4,7 +4,8 @@ Public API (everything else may change): :func:`read_merl`, :func:`write_merl`,
 :func:`read_table`, :func:`read_rgl`, :func:`read_rgl_at`,
 :func:`synthesize`, :func:`fit`, :func:`fit_many`, :func:`sample`, :func:`rank`,
 :func:`simplify`, :class:`Measurements`, :class:`FitResult`, :class:`Posterior`,
-:class:`Reduction`, :mod:`brdffit.models` and the error types.
+:class:`Reduction`, :mod:`brdffit.models`, :mod:`brdffit.export` (:class:`Export`,
+:func:`write_exports`) and the error types.
 
 Importing brdffit turns on JAX's 64-bit mode: fits run in float64 by default because
 measured BRDF values span 1e-4 to 1e4. float32 evaluation still works by passing
@@ -48,6 +49,7 @@ from brdffit.errors import (  # noqa: E402
     MissingDependencyError,
     ParameterError,
 )
+from brdffit.export import Export, ExportError, write_exports  # noqa: E402
 from brdffit.fit import fit, fit_many  # noqa: E402
 from brdffit.measurements import Measurements  # noqa: E402
 from brdffit.merl import read_merl, write_merl  # noqa: E402
@@ -77,6 +79,10 @@ __all__ = [
     "simplify",
     "synthesize",
     "write_merl",
+    "export",
+    "Export",
+    "ExportError",
+    "write_exports",
     "BrdffitError",
     "ChainTooShortError",
     "FitError",

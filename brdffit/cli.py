@@ -93,9 +93,14 @@ def cmd_info(args) -> None:
 def cmd_fit(args) -> None:
     from brdffit.fit import fit
 
+    model, data = _model(args.model, args.option), _load(args)
+    if args.export:  # refuse a target that cannot take the model before fitting
+        from brdffit.export import check_targets
+
+        check_targets(model, args.export)
     r = fit(
-        _model(args.model, args.option),
-        _load(args),
+        model,
+        data,
         args.metric,
         freeze=_freeze(args.freeze),
         cut_deg=args.cut,
@@ -110,6 +115,13 @@ def cmd_fit(args) -> None:
     print(r.report())
     if args.json:
         _write(args.json, r.to_json())
+    if args.export:
+        from brdffit.export import default_prefix, write_exports
+        from brdffit.models import label
+
+        prefix = args.export_prefix or default_prefix(args.file, args.json, label(model))
+        for e, paths in write_exports(r, args.export, prefix):
+            print(f"export {e.summary()} -> {', '.join(str(p) for p in paths)}")
 
 
 def _say(text: str) -> None:
@@ -328,6 +340,18 @@ def build_parser() -> argparse.ArgumentParser:
         "neighbouring cells",
     )
     s.add_argument("--json", metavar="OUT", help="write the result as JSON")
+    s.add_argument(
+        "--export",
+        metavar="TARGETS",
+        help="write the fitted material for renderers: comma-separated mitsuba,gltf,materialx "
+        "(each line says exact or approximate and the measured error)",
+    )
+    s.add_argument(
+        "--export-prefix",
+        metavar="PATH",
+        help="file prefix of the exports (PATH.mitsuba.xml, PATH.gltf, ...); default: the "
+        "--json path without .json, else INPUT-STEM.MODEL in the current folder",
+    )
     s.set_defaults(func=cmd_fit)
     s = sub.add_parser("sample", help="emcee posterior of one model, started at the LM fit")
     data_args(s)

@@ -1,0 +1,227 @@
+"""Exports of a fitted material to renderers: Mitsuba 3, glTF 2.0, MaterialX (OpenPBR).
+
+``export(result, target)`` maps a :class:`~brdffit.FitResult` to one target and says,
+by measurement, how well: it evaluates the exported material (with this package's own
+implementation of the target's BRDF, checked against Mitsuba 3 and an independent
+glTF implementation by the tests) and the model at :func:`error_directions`, and
+reports the relative RMS error of ``f cos(theta_i)`` and the RMS error of
+``ln(1 + f cos(theta_i))`` (:data:`ERROR_DEFINITION`). An export is *exact* when the
+relative error is at float64 round-off (``EXACT_TOL``); otherwise its parameters were
+fitted to the model by least squares (on the log error) and the errors are those left.
+
+Targets (each module documents its mapping, roughness convention and losses):
+
+* ``"mitsuba"`` -- a BSDF dict for ``mi.load_dict`` and the same BSDF as XML
+  (:mod:`brdffit.export.mitsuba`);
+* ``"gltf"`` -- a glTF 2.0 document holding one material, ``pbrMetallicRoughness`` with
+  ``KHR_materials_specular``, ``_ior``, ``_anisotropy``, ``_clearcoat``, ``_sheen`` where
+  they apply (:mod:`brdffit.export.gltf`);
+* ``"materialx"`` -- a MaterialX document with an ``open_pbr_surface``, only for the
+  models whose mapping is clean (:mod:`brdffit.export.materialx`).
+
+``write_exports(result, targets, prefix)`` writes the files atomically:
+``PREFIX.mitsuba.xml`` and ``PREFIX.mitsuba.json``, ``PREFIX.gltf``, ``PREFIX.mtlx``.
+"""
+
+from __future__ import annotations
+
+import types
+from collections.abc import Iterable
+from dataclasses import dataclass
+from pathlib import Path
+
+import jax.numpy as jnp
+import numpy as np
+
+from brdffit import models
+from brdffit.atomic import write_text
+from brdffit.errors import BrdffitError
+from brdffit.export import gltf, materialx, mitsuba
+from brdffit.export._match import (
+    ERROR_DEFINITION,
+    EXACT_TOL,
+    Match,
+    best,
+    error_directions,
+    log_rms,
+    match,
+    relative_rms,
+)
+from brdffit.models._grey import Grey
+from brdffit.result import FitResult
+
+TARGETS: dict[str, types.ModuleType] = {"mitsuba": mitsuba, "gltf": gltf, "materialx": materialx}
+"""Target name -> module with ``candidates(model, params)`` and ``finish(...)``."""
+
+
+class ExportError(BrdffitError, ValueError):
+    """An export target is unknown, or has no clean mapping for the model; says which."""
+
+
+@dataclass(frozen=True, eq=False)
+class Export:
+    """A fitted material written for one renderer, and how faithful it is.
+
+    Fields: ``target`` (``"mitsuba"``, ``"gltf"``, ``"materialx"``); ``model`` (the
+    fitted model's label); ``target_model`` (what was written, e.g. ``"principled"``);
+    ``exact`` (measured error <= ``EXACT_TOL``); ``error`` (relative RMS of ``f cos_i``)
+    and ``log_error`` (RMS of ``ln(1 + f cos_i)`` differences), :data:`ERROR_DEFINITION`;
+    ``fitted`` (the target's parameters were fitted by least
+    squares rather than mapped in closed form); ``notes`` (roughness convention, what is
+    lost); ``material`` (the Mitsuba dict, the glTF document, the OpenPBR inputs);
+    ``files`` (file suffix -> text, what :func:`write_exports` writes).
+    """
+
+    target: str
+    model: str
+    target_model: str
+    exact: bool
+    error: float
+    log_error: float
+    fitted: bool
+    notes: tuple[str, ...]
+    material: dict
+    files: dict[str, str]
+
+    def summary(self) -> str:
+        """One line: target, exact or approximate, the error and what was written."""
+        kind = "exact" if self.exact else "approximate" + (" (fitted)" if self.fitted else "")
+        return (
+            f"{self.target}: {kind}, relative RMS error of f cos(theta_i) {self.error:.3g}, "
+            f"log error {self.log_error:.3g} ({self.model} -> {self.target_model})"
+        )
+
+
+def parse_targets(text: str | Iterable[str]) -> tuple[str, ...]:
+    """``"mitsuba,gltf"`` (or a sequence) -> checked target names, in order, no repeats.
+
+    Raises :class:`ExportError` naming an unknown target and listing :data:`TARGETS`.
+    """
+    items = text.split(",") if isinstance(text, str) else list(text)
+    out: list[str] = []
+    for t in (s.strip().lower() for s in items):
+        if not t:
+            continue
+        if t not in TARGETS:
+            raise ExportError(f"export target {t!r} unknown; choose from {', '.join(TARGETS)}")
+        if t not in out:
+            out.append(t)
+    if not out:
+        raise ExportError(f"no export target given; choose from {', '.join(TARGETS)}")
+    return tuple(out)
+
+
+def check_targets(model: object, targets: str | Iterable[str]) -> tuple[str, ...]:
+    """The checked target names; :class:`ExportError` when one cannot take ``model``.
+
+    ``model`` is a built model (:func:`brdffit.models.get`, grey variants included), so
+    the command line can refuse before it fits. Returns :func:`parse_targets` of
+    ``targets``.
+    """
+    names = parse_targets(targets)
+    base = _base(model)
+    for t in names:
+        reason = getattr(TARGETS[t], "unsupported", lambda m: None)(base)
+        if reason:
+            raise ExportError(f"export {t}: {reason}")
+    return names
+
+
+def default_prefix(input_path: str | Path, json_path: str | Path | None, label: str) -> Path:
+    """Where ``brdffit fit --export`` writes without ``--export-prefix``.
+
+    ``json_path`` without its suffix when given (``out/fit.json`` -> ``out/fit``), else
+    the input file's stem and the model label in the current folder
+    (``blue-acrylic.binary``, ``walter`` -> ``blue-acrylic.walter``).
+    """
+    if json_path:
+        return Path(json_path).with_suffix("")
+    safe = "".join(c if c.isalnum() or c in "_-=+" else "_" for c in label).strip("_")
+    return Path(f"{Path(input_path).stem}.{safe}")
+
+
+def _base(model: object) -> object:
+    return model.base if isinstance(model, Grey) else model
+
+
+def _model_and_values(result: FitResult, wi: np.ndarray, wo: np.ndarray):
+    model = models.get(result.model, **dict(result.options))
+    params = {k: np.asarray(v, float) for k, v in result.params.items()}
+    f = np.asarray(model.eval(params, wi, wo), float)
+    if isinstance(model, Grey):
+        params = model.expand({k: jnp.asarray(v) for k, v in params.items()})
+    return _base(model), {k: np.array(v, float) for k, v in params.items()}, f
+
+
+def export(result: FitResult, target: str) -> Export:
+    """Map the fitted material of ``result`` to ``target`` and measure the error.
+
+    Tries the target's candidate materials for the model (closed-form starts, kept when
+    exact, else fitted by least squares) and keeps an exact one, else the smallest log error.
+    Raises :class:`ExportError` for an unknown target, a model the target has no clean
+    mapping for (MaterialX) or a result with non-finite parameters.
+    """
+    (name,) = parse_targets(target)
+    module = TARGETS[name]
+    bad = [k for k, v in result.params.items() if not np.all(np.isfinite(v))]
+    if bad:
+        raise ExportError(f"export {name}: the fit's parameters {bad} are not finite")
+    wi, wo = error_directions()
+    base, params, f_model = _model_and_values(result, wi, wo)
+    reason = getattr(module, "unsupported", lambda m: None)(base)
+    if reason:
+        raise ExportError(f"export {name}: {reason}")
+    starts = module.candidates(base, params)
+    first = [match(fam, start, f_model, wi, wo, fit=False) for fam, start in starts]
+    exact = [m for m in first if m.exact]
+    chosen: Match = exact[0] if exact else best([match(*s, f_model, wi, wo) for s in starts])
+    material, files, notes = module.finish(result, base, chosen)
+    return Export(
+        target=name,
+        model=models.label(result.model, result.options),
+        target_model=chosen.family.name,
+        exact=chosen.exact,
+        error=chosen.error,
+        log_error=chosen.log_error,
+        fitted=chosen.fitted,
+        notes=tuple(notes) + (f"error: {ERROR_DEFINITION}",),
+        material=material,
+        files=files,
+    )
+
+
+def write_exports(
+    result: FitResult, targets: str | Iterable[str], out_prefix: str | Path
+) -> list[tuple[Export, tuple[Path, ...]]]:
+    """Export ``result`` to every target and write each file atomically.
+
+    Files are ``out_prefix`` plus each export's suffixes (``.mitsuba.xml``,
+    ``.mitsuba.json``, ``.gltf``, ``.mtlx``). Every target is checked before anything
+    is written. Returns each export with the paths written.
+    """
+    names = check_targets(models.get(result.model, **dict(result.options)), targets)
+    done = [export(result, t) for t in names]
+    out = []
+    for e in done:
+        paths = tuple(Path(f"{out_prefix}{suffix}") for suffix in e.files)
+        for p, text in zip(paths, e.files.values(), strict=True):
+            write_text(p, text)
+        out.append((e, paths))
+    return out
+
+
+__all__ = [
+    "ERROR_DEFINITION",
+    "EXACT_TOL",
+    "TARGETS",
+    "Export",
+    "ExportError",
+    "check_targets",
+    "default_prefix",
+    "error_directions",
+    "export",
+    "log_rms",
+    "parse_targets",
+    "relative_rms",
+    "write_exports",
+]

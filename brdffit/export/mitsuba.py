@@ -1,0 +1,380 @@
+"""Export to Mitsuba 3: a BSDF dict for ``mi.load_dict`` and the same BSDF as XML.
+
+Targets (``mitsuba_bsdf`` evaluates each in numpy; the test checks it against Mitsuba):
+
+* ``diffuse`` -- Lambert; ``lambert`` maps to it exactly.
+* ``principled`` with ``metallic = 1`` (Schlick Fresnel of ``base_color``, GGX, separable
+  Smith), alone or in a ``blendbsdf`` with a ``diffuse``: ``(1 - w) reflectance / pi +
+  w lobe``. ``walter`` with GGX and uncorrelated masking maps to it exactly when its
+  ``ks`` is grey and ``max(kd) + ks <= 1`` (``w = ks``, ``reflectance = kd / (1 - ks)``,
+  ``base_color = f0``), with alpha >= 0.001 (Mitsuba's floor) and, if anisotropic,
+  ``0.1 <= alpha_y / alpha_x <= 1`` (principled stretches along the tangent only).
+* ``roughconductor`` (GGX or Beckmann, exact conductor Fresnel with RGB ``eta``, ``k``,
+  RGB ``specular_reflectance``), alone or blended with a ``diffuse`` the same way. Exact
+  only where the model's Fresnel is 1 (Mitsuba's Beckmann ``G1`` is Walter's rational fit,
+  so ``walter[distribution=beckmann,smith=rational,diffuse=false]`` with ``f0 = 1`` is
+  exact); a Schlick ``f0`` starts from Gulbrandsen's (2014) index with white edge tint,
+  ``eta = (1 - f0)/(1 + f0)``, ``k = 2 sqrt(f0)/(1 + f0)``.
+* ``principled`` with the features the model has, for ``disney``, ``filament`` and
+  ``course_cook_torrance``. Mitsuba's principled differs from Disney 2012 in its exact
+  dielectric Fresnel for the untinted dielectric part, its luminance weights (Rec. 709)
+  and its clear coat, which Mitsuba 3 evaluates as ``0.25 clearcoat F D G1(wi) G1(wo)``
+  without the microfacet ``1 / (4 cos_i cos_o)`` (4 times Disney's at normal incidence).
+  So ``disney`` maps exactly only without clear coat and where the Fresnel and tint
+  differences drop out (``metallic = 1``, or ``specular_tint = 1`` with a grey base
+  colour; measured in the tests), approximately elsewhere.
+* ``roughplastic`` is never used: its diffuse part carries internal-reflection and
+  transmittance factors that none of brdffit's models has.
+
+Roughness conventions: ``roughconductor``'s ``alpha`` IS the microfacet alpha (GGX or
+Beckmann; for Cook-Torrance the rms slope ``m``): copied, never squared.
+``principled``'s ``roughness`` is squared by Mitsuba (``alpha = roughness^2``): a GGX
+``alpha`` is exported as ``sqrt(alpha)``, a perceptual roughness (Disney, Filament) as is.
+
+Any other model, and every inexact case, is fitted (``_match.match``): the candidates
+below are tried and the one with the smallest log error is written. Mitsuba's BSDFs are
+one-sided, like brdffit's models (black below the horizon).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+import numpy as np
+
+from brdffit.abstract_model import AbstractModel
+from brdffit.export import mitsuba_bsdf as mb
+from brdffit.export._match import Family, Match, Slot
+from brdffit.export.mitsuba_xml import to_xml
+from brdffit.result import FitResult
+
+Start = tuple[Family, dict[str, object]]
+
+
+def _rgb(v: object) -> dict:
+    return {"type": "rgb", "value": [float(x) for x in np.broadcast_to(v, (3,))]}
+
+
+def _blend(p: Mapping[str, object], lobe: dict) -> dict:
+    if "weight" not in p or float(p["weight"]) >= 1.0:
+        return lobe
+    return {
+        "type": "blendbsdf",
+        "weight": float(p["weight"]),
+        "bsdf_0": {"type": "diffuse", "reflectance": _rgb(p["reflectance"])},
+        "bsdf_1": lobe,
+    }
+
+
+def _with_diffuse(p: Mapping[str, object], lobe: np.ndarray, wi: np.ndarray) -> np.ndarray:
+    if "weight" not in p:
+        return lobe
+    w = float(p["weight"])
+    return (1.0 - w) * mb.diffuse(p["reflectance"], wi, wi) + w * lobe
+
+
+def _diffuse_slots(on: bool) -> tuple[Slot, ...]:
+    return (Slot("weight", 1, 0.0, 1.0), Slot("reflectance", 3, 0.0, 1.0)) if on else ()
+
+
+def _alpha_slots(aniso: bool, lo: float = 1e-4) -> tuple[Slot, ...]:
+    if aniso:
+        return (Slot("alpha_u", 1, lo, 2.0), Slot("alpha_v", 1, lo, 2.0))
+    return (Slot("alpha", 1, lo, 2.0),)
+
+
+def diffuse_family() -> Family:
+    """``diffuse`` with RGB ``reflectance``."""
+
+    def build(p: Mapping[str, object]) -> dict:
+        return {"type": "diffuse", "reflectance": _rgb(p["reflectance"])}
+
+    return Family(
+        "diffuse",
+        (Slot("reflectance", 3, 0.0, 1.0),),
+        lambda p, wi, wo: mb.diffuse(p["reflectance"], wi, wo),
+        build,
+    )
+
+
+def conductor_family(kind: str, aniso: bool, with_diffuse: bool) -> Family:
+    """``roughconductor`` (``kind`` ggx or beckmann), optionally blended with a diffuse."""
+
+    def alphas(p: Mapping[str, object]) -> tuple[float, float]:
+        return (p["alpha_u"], p["alpha_v"]) if aniso else (p["alpha"], p["alpha"])
+
+    def evaluate(p: Mapping[str, object], wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
+        ax, ay = alphas(p)
+        lobe = mb.roughconductor(kind, ax, ay, p["eta"], p["k"], p["specular"], wi, wo)
+        return _with_diffuse(p, lobe, wi)
+
+    def build(p: Mapping[str, object]) -> dict:
+        ax, ay = alphas(p)
+        rough = {"alpha_u": float(ax), "alpha_v": float(ay)} if aniso else {"alpha": float(ax)}
+        lobe = {"type": "roughconductor", "distribution": kind, **rough}
+        lobe |= {"eta": _rgb(p["eta"]), "k": _rgb(p["k"])}
+        lobe["specular_reflectance"] = _rgb(p["specular"])
+        return _blend(p, lobe)
+
+    slots = _diffuse_slots(with_diffuse) + _alpha_slots(aniso)
+    slots += (Slot("eta", 3, 0.0, 10.0), Slot("k", 3, 0.0, 20.0), Slot("specular", 3, 0.0, 1.0))
+    return Family(f"roughconductor ({kind})", slots, evaluate, build)
+
+
+PRINCIPLED_FEATURES = (
+    "metallic",
+    "anisotropic",
+    "spec_tint",
+    "sheen",
+    "sheen_tint",
+    "flatness",
+    "clearcoat",
+    "clearcoat_gloss",
+)
+
+
+def principled_family(features: tuple[str, ...], with_diffuse: bool = False) -> Family:
+    """``principled`` with ``base_color``, ``roughness``, ``specular`` and ``features``.
+
+    ``features`` is a subset of :data:`PRINCIPLED_FEATURES`; the others stay 0 (off).
+    ``with_diffuse``: blended with a ``diffuse`` (used with ``metallic`` fixed at 1).
+    """
+    metal = with_diffuse
+
+    def values(p: Mapping[str, object]) -> dict[str, object]:
+        q = {k: p[k] for k in ("base_color", "roughness", "specular", *features) if k in p}
+        return q | {"metallic": 1.0} if metal else q
+
+    def evaluate(p: Mapping[str, object], wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
+        return _with_diffuse(p, mb.principled(values(p), wi, wo), wi)
+
+    def build(p: Mapping[str, object]) -> dict:
+        q = {k: _rgb(v) if k == "base_color" else float(v) for k, v in values(p).items()}
+        return _blend(p, {"type": "principled", **q})
+
+    slots = _diffuse_slots(with_diffuse) + (
+        Slot("base_color", 3, 0.0, 1.0),
+        Slot("roughness", 1, 0.0, 1.0),
+    )
+    slots += () if metal else (Slot("specular", 1, 1e-3, 1.0),)
+    slots += tuple(Slot(f, 1, 0.0, 1.0) for f in features)
+    name = "blendbsdf(diffuse, principled metallic=1)" if metal else "principled"
+    return Family(name, slots, evaluate, build)
+
+
+def gulbrandsen(f0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Conductor index ``(eta, k)`` with normal reflectance ``f0`` and white edge tint.
+
+    Gulbrandsen 2014 (JCGT 3(4)) with ``g = 1``: ``eta = (1 - f0)/(1 + f0)``,
+    ``k = 2 sqrt(f0)/(1 + f0)``; ``f0 = 1`` gives Mitsuba's perfect mirror (0, 1).
+    """
+    r = np.clip(np.asarray(f0, float), 0.0, 1.0)
+    return (1.0 - r) / (1.0 + r), 2.0 * np.sqrt(r) / (1.0 + r)
+
+
+def _split(kd: np.ndarray | None, ks: np.ndarray) -> dict[str, object]:
+    """Blend weight and diffuse reflectance for ``kd / pi + ks lobe`` (lobe colour ``ks / w``)."""
+    if kd is None:
+        return {}
+    w = float(np.clip(max(np.max(ks), 1e-3), 0.0, 1.0 - 1e-3))
+    if np.max(ks) + np.max(kd) > 1.0:  # no exact split: share the excess
+        w = float(np.clip(np.max(ks) / (np.max(ks) + np.max(kd)), 1e-3, 1.0 - 1e-3))
+    return {"weight": w, "reflectance": np.clip(kd / (1.0 - w), 0.0, 1.0)}
+
+
+def _principled_roughness(ax: float, ay: float) -> dict[str, float]:
+    """``roughness`` (and ``anisotropic``) for GGX alphas: ``r^2 = sqrt(ax ay)``."""
+    r = float(np.sqrt(np.sqrt(ax * ay)))
+    if ax == ay:
+        return {"roughness": r}
+    return {"roughness": r, "anisotropic": float(np.clip((1.0 - ay / ax) / 0.9, 0.0, 1.0))}
+
+
+def _alphas(p: Mapping[str, np.ndarray], name: str) -> tuple[float, float]:
+    if f"{name}_x" in p:
+        return float(p[f"{name}_x"]), float(p[f"{name}_y"])
+    return float(p[name]), float(p[name])
+
+
+def _conductor_start(
+    kind: str, ax: float, ay: float, kd: np.ndarray | None, ks: np.ndarray, f0: np.ndarray
+) -> Start:
+    aniso = ax != ay
+    split = _split(kd, ks)
+    w = split.get("weight", 1.0)
+    eta, k = gulbrandsen(f0)
+    rough = {"alpha_u": ax, "alpha_v": ay} if aniso else {"alpha": ax}
+    start = split | rough | {"eta": eta, "k": k, "specular": np.clip(ks / w, 0.0, 1.0)}
+    return conductor_family(kind, aniso, kd is not None), start
+
+
+def _metal_start(ax: float, ay: float, kd: np.ndarray | None, ks: np.ndarray, f0: np.ndarray):
+    rough = _principled_roughness(ax, ay)
+    feats = ("anisotropic",) if "anisotropic" in rough else ()
+    split = _split(kd, np.full(3, np.mean(ks)))
+    if kd is None:
+        split = {"weight": float(np.mean(ks)), "reflectance": np.zeros(3)}
+    return principled_family(feats, with_diffuse=True), split | rough | {"base_color": f0}
+
+
+def _walter(model: AbstractModel, p: Mapping[str, np.ndarray]) -> list[Start]:
+    ax, ay = _alphas(p, "alpha")
+    kd, ks = p.get("kd"), p.get("ks", np.ones(3))
+    out = [_conductor_start(model.distribution, ax, ay, kd, ks, p["f0"])]
+    if model.distribution == "ggx":
+        out.append(_metal_start(ax, ay, kd, ks, p["f0"]))
+    return out
+
+
+def _cook_torrance(model: AbstractModel, p: Mapping[str, np.ndarray]) -> list[Start]:
+    m = float(p["m"])
+    fam, start = _conductor_start("beckmann", m, m, p.get("kd"), p["ks"], np.ones(3))
+    if model.fresnel == "schlick":
+        start["eta"], start["k"] = gulbrandsen(p["f0"])
+    elif model.fresnel == "dielectric":
+        start["eta"], start["k"] = np.full(3, float(p["eta"])), np.zeros(3)
+    else:
+        start["eta"], start["k"] = p["eta"], p["k"]
+    return [(fam, start)]
+
+
+def _disney(model: AbstractModel, p: Mapping[str, np.ndarray]) -> list[Start]:
+    names = {"spec_tint": "specular_tint", "flatness": "subsurface"}
+    feats = tuple(f for f in PRINCIPLED_FEATURES if names.get(f, f) in p)
+    start = {f: p[names.get(f, f)] for f in feats}
+    keep = ("base_color", "roughness", "specular")
+    return [(principled_family(feats), start | {k: p[k] for k in keep})]
+
+
+def _filament(model: AbstractModel, p: Mapping[str, np.ndarray]) -> list[Start]:
+    if model.shading == "cloth":
+        return _generic(model, p)
+    feats = ("metallic", "flatness")
+    start: dict[str, object] = {"base_color": p["base_color"], "roughness": p["roughness"]}
+    start["flatness"] = 0.0
+    start |= {"metallic": p["metallic"], "specular": min(2.0 * p["reflectance"] ** 2, 1.0)}
+    if model.anisotropy:
+        feats += ("anisotropic",)
+        start["anisotropic"] = abs(p["anisotropy"])
+    if model.sheen:
+        feats += ("sheen",)
+        start["sheen"] = float(np.mean(p["sheen_color"]))
+    if model.clearcoat:
+        feats += ("clearcoat", "clearcoat_gloss")
+        gloss = (0.1 - p["clear_coat_roughness"] ** 2) / 0.099
+        start |= {"clearcoat": p["clear_coat"], "clearcoat_gloss": np.clip(gloss, 0, 1)}
+    alpha = float(p["roughness"]) ** 2
+    m, bc = float(p["metallic"]), p["base_color"]
+    f0 = 0.16 * p["reflectance"] ** 2 * (1.0 - m) + bc * m
+    return [
+        (principled_family(feats), start),
+        _metal_start(alpha, alpha, bc * (1.0 - m), np.ones(3), f0),
+    ]
+
+
+def _course(model: AbstractModel, p: Mapping[str, np.ndarray]) -> list[Start]:
+    r, albedo = float(p["roughness"]), p["albedo"]
+    m = float(p.get("metallic", 0.0))
+    f0 = p["f0"] if "f0" in p else 0.04 * (1 - m) + albedo * m
+    start = {"base_color": albedo, "roughness": r, "metallic": m, "flatness": 0.0}
+    start["specular"] = float(np.clip(np.mean(f0) / 0.08, 1e-3, 1.0))
+    return [
+        (principled_family(("metallic", "flatness")), start),
+        _metal_start(r**2, r**2, albedo * (1 - m), np.ones(3), f0),
+    ]
+
+
+def _first(p: Mapping[str, np.ndarray], names: tuple[str, ...], default: object) -> object:
+    return next((p[n] for n in names if n in p), default)
+
+
+def generic_alpha(p: Mapping[str, np.ndarray]) -> float:
+    """A microfacet alpha to start from: the model's own ``alpha`` or ``m``, else the
+    Beckmann-equivalent ``sqrt(2 / (n + 2))`` of a Phong-type exponent ``n``, else 0.2."""
+    found = _first(p, ("alpha", "alpha_1", "m", "m_1", "sigma"), None)
+    if found is not None:
+        return float(np.mean(found))
+    n = _first(p, ("n", "n_1"), None)
+    return float(np.sqrt(2.0 / (float(n) + 2.0))) if n is not None else 0.2
+
+
+def _generic(model: AbstractModel, p: Mapping[str, np.ndarray]) -> list[Start]:
+    kd = np.asarray(_first(p, ("kd", "rd", "rho", "albedo", "base_color"), np.full(3, 0.5)))
+    alpha = float(np.clip(np.mean(generic_alpha(p)), 1e-3, 1.0))
+    out = [(diffuse_family(), {"reflectance": kd})]
+    ks = np.full(3, 0.5)
+    out.append(_conductor_start("ggx", alpha, alpha, np.clip(kd, 0, 0.5), ks, np.full(3, 0.04)))
+    return out
+
+
+def candidates(model: AbstractModel, p: Mapping[str, np.ndarray]) -> list[Start]:
+    """Families worth trying for ``model`` (not a grey wrapper) with RGB parameters ``p``,
+    each with its closed-form start."""
+    table = {
+        "lambert": lambda m, q: [(diffuse_family(), {"reflectance": q["kd"]})],
+        "walter": _walter,
+        "cook_torrance": _cook_torrance,
+        "disney": _disney,
+        "filament": _filament,
+        "course_cook_torrance": _course,
+    }
+    if model.name == "ward":
+        ax, ay = _alphas(p, "alpha")
+        return [_conductor_start("beckmann", ax, ay, p.get("kd"), p["ks"], np.ones(3))]
+    return table.get(model.name, _generic)(model, p)
+
+
+LOSSES = {
+    "walter": "Schlick Fresnel becomes the conductor Fresnel of a fitted index (roughconductor) "
+    "or the RGB ks becomes one blend weight (principled); height-correlated masking and the "
+    "exact Beckmann Lambda become Mitsuba's separable Smith G (rational for Beckmann)",
+    "cook_torrance": "V-cavity masking becomes Mitsuba's separable Smith G (rational Beckmann); "
+    "Schlick Fresnel becomes the conductor Fresnel of a fitted index",
+    "ward": "Ward's elliptical Gaussian becomes a Beckmann microfacet lobe with Smith masking",
+    "disney": "Disney 2012's Schlick F0 = 0.08 specular becomes exact dielectric Fresnel for "
+    "the untinted part; tints divide by Rec. 709 luminance, not (.3, .6, .1); Mitsuba's clear "
+    "coat lacks 1 / (4 cos_i cos_o)",
+    "filament": "the Lambert diffuse becomes Disney's diffuse (flatness toward "
+    "Hanrahan-Krueger); height-correlated masking becomes separable; sheen and clear coat "
+    "shapes differ",
+}
+
+ROUGHNESS = {
+    "roughconductor": "roughconductor alpha is the microfacet alpha itself (GGX or Beckmann, "
+    "Cook-Torrance's rms slope m): copied, not squared",
+    "principled": "principled roughness is squared by Mitsuba (alpha = max(0.001, "
+    "roughness^2)): a GGX alpha is written as sqrt(alpha), a perceptual roughness as it is",
+    "blendbsdf": "principled roughness is squared by Mitsuba (alpha = max(0.001, "
+    "roughness^2)): a GGX alpha is written as sqrt(alpha)",
+    "diffuse": "diffuse: no roughness",
+}
+
+
+def finish(result: FitResult, model: AbstractModel, m: Match) -> tuple[dict, dict, list[str]]:
+    """The Mitsuba dict, its XML and JSON files and the notes of a chosen match."""
+    import json
+
+    from brdffit.models import label
+
+    bsdf = m.family.build(m.params)
+    name = label(result.model, result.options)
+    kind = "exact" if m.exact else "approximate"
+    comment = f"brdffit: {name} fitted to {result.source}; {kind}, error {m.error:.3g}"
+    files = {
+        ".mitsuba.xml": to_xml(bsdf, comment=comment.replace("--", "- -")),
+        ".mitsuba.json": json.dumps(bsdf, indent=2) + "\n",
+    }
+    lost = (
+        "Mitsuba reproduces the model"
+        if m.exact
+        else LOSSES.get(model.name, f"{model.name}'s lobes become {m.family.name}")
+    )
+    rough = next(v for k, v in ROUGHNESS.items() if m.family.name.startswith(k))
+    notes = [f"roughness: {rough}", f"{kind}: {lost}"]
+    if "weight" in m.params:
+        notes.append(
+            "kd / pi + lobe is written as blendbsdf (1 - w) diffuse(kd / (1 - w)) + w lobe; "
+            "Mitsuba blends convexly and caps reflectances at 1, so only max(kd) + ks <= 1 "
+            "with a grey ks can be exact"
+        )
+    return bsdf, files, notes
