@@ -5,7 +5,8 @@ Public API (everything else may change): :func:`read_merl`, :func:`write_merl`,
 :func:`synthesize`, :func:`fit`, :func:`fit_many`, :func:`sample`, :func:`rank`,
 :func:`simplify`, :class:`Measurements`, :class:`FitResult`, :class:`Posterior`,
 :class:`Reduction`, :mod:`brdffit.models`, :mod:`brdffit.export` (:class:`Export`,
-:func:`write_exports`) and the error types.
+:func:`write_exports`), :mod:`brdffit.figures`, :func:`write_fit_html`,
+:func:`write_sweep_html` and the error types.
 
 Importing brdffit turns on JAX's 64-bit mode: fits run in float64 by default because
 measured BRDF values span 1e-4 to 1e4. float32 evaluation still works by passing
@@ -51,6 +52,7 @@ from brdffit.errors import (  # noqa: E402
 )
 from brdffit.export import Export, ExportError, write_exports  # noqa: E402
 from brdffit.fit import fit, fit_many  # noqa: E402
+from brdffit.html_report import write_fit_html, write_sweep_html  # noqa: E402
 from brdffit.measurements import Measurements  # noqa: E402
 from brdffit.merl import read_merl, write_merl  # noqa: E402
 from brdffit.rank import Ranking, rank  # noqa: E402
@@ -78,7 +80,9 @@ __all__ = [
     "sample",
     "simplify",
     "synthesize",
+    "write_fit_html",
     "write_merl",
+    "write_sweep_html",
     "export",
     "Export",
     "ExportError",

@@ -122,6 +122,10 @@ def cmd_fit(args) -> None:
         prefix = args.export_prefix or default_prefix(args.file, args.json, label(model))
         for e, paths in write_exports(r, args.export, prefix):
             print(f"export {e.summary()} -> {', '.join(str(p) for p in paths)}")
+    if args.report:
+        from brdffit.html_report import write_fit_html
+
+        write_fit_html(args.report, r, data)
 
 
 def _say(text: str) -> None:
@@ -224,9 +228,12 @@ def cmd_sweep(args) -> None:
 
 
 def cmd_report(args) -> None:
+    from brdffit.html_report import write_sweep_html
     from brdffit.report import write_report
 
-    print(write_report(args.sweep_dir, families=args.families))
+    md = write_report(args.sweep_dir, families=args.families)
+    print(write_sweep_html(args.sweep_dir, families=args.families))
+    print(md)
 
 
 def cmd_check(args) -> int:
@@ -340,6 +347,7 @@ def build_parser() -> argparse.ArgumentParser:
         "neighbouring cells",
     )
     s.add_argument("--json", metavar="OUT", help="write the result as JSON")
+    s.add_argument("--report", metavar="HTML", help="write a one-file HTML report with figures")
     s.add_argument(
         "--export",
         metavar="TARGETS",
@@ -403,7 +411,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--no-progress", action="store_true")
     s.add_argument("--families", metavar="CSV", help=FAMILIES_HELP)
     s.set_defaults(func=cmd_sweep)
-    s = sub.add_parser("report", help="Markdown report of a sweep folder")
+    s = sub.add_parser("report", help="Markdown and one-file HTML report of a sweep folder")
     s.add_argument("sweep_dir")
     s.add_argument("--families", metavar="CSV", help=FAMILIES_HELP)
     s.set_defaults(func=cmd_report)
