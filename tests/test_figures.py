@@ -15,23 +15,21 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 
 from brdffit import Measurements, models, synthesize
 from brdffit.errors import MeasurementsError
-from brdffit.figures import (
+from brdffit.figures import halfdiff_figure, polar_figure, sphere_figure
+from brdffit.geometry import io_to_halfdiff, merl_indices
+from brdffit.merl import lookup, merl_grid, merl_grid_measurements, merl_subgrid
+from brdffit.render import (
     DEFAULT_LIGHT,
     Environment,
-    halfdiff_figure,
     in_plane_directions,
     merl_stride,
     model_brdf,
     nearest_bin,
-    polar_figure,
     render_sphere,
-    sphere_figure,
     sphere_images,
     sphere_normals,
     tonemap,
 )
-from brdffit.geometry import io_to_halfdiff, merl_indices
-from brdffit.merl import lookup, merl_grid, merl_grid_measurements, merl_subgrid
 from tests.helpers import random_pairs
 
 KD = np.array([0.2, 0.5, 0.8])
