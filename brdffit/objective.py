@@ -35,8 +35,8 @@ from brdffit.metrics import Metric, Prepared
 from brdffit.parameters import Parameter, ParameterLayout, Params
 
 GRAM_CHUNK = 65_536
-"""Residuals per chunk of :meth:`Objective.block_moments`' Gram sums (65,536 x k^2 floats,
-50 MB for k = 10)."""
+"""Residuals per chunk of :meth:`Objective.natural_block_moments`' Gram sums (65,536 x k^2
+floats, 50 MB for k = 10)."""
 
 
 class Objective(eqx.Module):
@@ -147,12 +147,23 @@ class Objective(eqx.Module):
     ) -> tuple[Float[Array, "b k"], Float[Array, "b k k"]]:
         """Per block: the summed scores ``sum J_i^T e_i`` (b, k) and ``J_b^T J_b`` (b, k, k).
 
-        ``block``: the block index (0..``n_blocks``-1) of each sample; its three residuals
-        (RGB) go to the same block. Natural units, as :meth:`natural_moments`. The Gram
-        matrices are summed over chunks of :data:`GRAM_CHUNK` residuals, so memory stays
-        at ``GRAM_CHUNK k^2`` floats whatever the sample count.
+        The last two of :meth:`natural_block_moments` (arguments there).
         """
-        jac, e, _ = self._natural_jacobian(z, prep)
+        return self.natural_block_moments(z, prep, block, n_blocks)[2:]
+
+    def natural_block_moments(
+        self, z: Float[Array, " k"], prep: Prepared, block: Int[Array, " n"], n_blocks: int
+    ) -> tuple[Float[Array, "k k"], Float[Array, ""], Float[Array, "b k"], Float[Array, "b k k"]]:
+        """``(J^T J, r.r, scores, grams)`` for the block covariance, from one Jacobian.
+
+        ``J``, ``e`` and ``r`` as :meth:`natural_moments` (natural units); per block ``b``
+        the score ``J_b^T e_b`` (b, k) and Gram matrix ``J_b^T J_b`` (b, k, k), whose sum
+        over the blocks is ``J^T J``. ``block``: the block index (0..``n_blocks``-1) of
+        each sample; its three residuals (RGB) go to the same block. The Gram matrices
+        are summed over chunks of :data:`GRAM_CHUNK` residuals, so memory stays at
+        ``GRAM_CHUNK k^2`` floats whatever the sample count.
+        """
+        jac, e, r = self._natural_jacobian(z, prep)
         ids = jnp.repeat(block, 3)  # residuals are sample-major: (n, 3).ravel()
         scores = jax.ops.segment_sum(jac * e[:, None], ids, num_segments=n_blocks)
         m, k = jac.shape
@@ -166,7 +177,8 @@ class Objective(eqx.Module):
             return acc + jax.ops.segment_sum(outer, i, num_segments=n_blocks + 1), None
 
         grams, _ = jax.lax.scan(add, jnp.zeros((n_blocks + 1, k, k), jac.dtype), (jc, ic))
-        return scores, grams[:n_blocks]
+        grams = grams[:n_blocks]  # the last one collects the padding
+        return jnp.sum(grams, axis=0), r @ r, scores, grams
 
     def _natural_jacobian(self, z: Array, prep: Prepared) -> tuple[Array, Array, Array]:
         """``(J, e, r)``: the robust residuals' Jacobian in natural units, ``e`` and ``r``."""
@@ -214,6 +226,12 @@ def natural_moments(obj: Objective, z: Array, prep: Prepared):
 def block_moments(obj: Objective, z: Array, prep: Prepared, block: Array, n_blocks: int):
     """Jitted :meth:`Objective.block_moments` (``n_blocks`` static)."""
     return obj.block_moments(z, prep, block, n_blocks)
+
+
+@eqx.filter_jit
+def natural_block_moments(obj: Objective, z: Array, prep: Prepared, block: Array, n_blocks: int):
+    """Jitted :meth:`Objective.natural_block_moments` (``n_blocks`` static)."""
+    return obj.natural_block_moments(z, prep, block, n_blocks)
 
 
 @eqx.filter_jit

@@ -27,7 +27,9 @@ halves. It needs many blocks (it counts them, :func:`describe`) and none that al
 identifies a parameter.
 
 Only k x k matrices (``J^T J`` and ``J^T diag(r^2) J``, formed on the device by
-:meth:`brdffit.objective.Objective.natural_moments`) reach numpy.
+:meth:`brdffit.objective.Objective.natural_moments`; for ``"blocks"``, ``J^T J`` and
+the blocks' scores and Gram matrices, from one Jacobian by
+:meth:`~brdffit.objective.Objective.natural_block_moments`) reach numpy.
 """
 
 from __future__ import annotations
@@ -38,6 +40,7 @@ from dataclasses import dataclass
 
 import jax.numpy as jnp
 import numpy as np
+from jaxtyping import Array
 
 from brdffit import objective as objective_mod
 from brdffit.metrics import Prepared
@@ -117,41 +120,76 @@ class Outcome:
     robust_scale: float | None
 
 
+def conditioning(jtj: np.ndarray) -> tuple[float, str | None, np.ndarray]:
+    """Condition of the column-scaled ``J^T J``, why it has no inverse, and weak scalars.
+
+    Returns (condition, reason, weak): ``reason`` is None when ``J^T J`` can be inverted;
+    ``weak`` flags the scalars that carry the near-null directions of the column-scaled
+    ``J^T J`` (eigenvalues below :data:`NULL_EIGEN` of the largest; a component above 0.3
+    of the unit eigenvector), i.e. the parameters the data do not identify on their own.
+    """
+    k = jtj.shape[0]
+    weak = np.zeros(k, bool)
+    if k == 0:
+        return float("nan"), "no free parameter", weak
+    if not np.all(np.isfinite(jtj)):
+        return float("inf"), "J^T J is not finite", weak
+    d = np.sqrt(np.diag(jtj))
+    if np.any(d == 0):
+        return float("inf"), "a parameter does not change the residuals", d == 0
+    ev, vec = np.linalg.eigh(jtj / np.outer(d, d))
+    cond = float(ev[-1] / ev[0]) if ev[0] > 0 else float("inf")
+    small = ev < NULL_EIGEN * ev[-1]
+    weak = np.any(np.abs(vec[:, small]) > 0.3, axis=1) if small.any() else weak
+    if not np.isfinite(cond) or cond > SINGULAR:
+        return cond, f"J^T J is singular to working precision (condition {cond:.3g})", weak
+    return cond, None, weak
+
+
 def covariance(
     jtj: np.ndarray, meat: np.ndarray, ee: float, n_data: int, method: str
 ) -> tuple[np.ndarray | None, float, str | None, np.ndarray]:
     """Covariance of the scalars from ``J^T J``, the sandwich's meat and ``e.e``.
 
-    ``meat`` is ``J^T diag(e^2) J``; ``method`` as :data:`ERRORS` (``"blocks"`` is then
-    replaced by :func:`block_jackknife`, this gives its condition and weak scalars).
+    ``meat`` is ``J^T diag(e^2) J``; ``method`` ``"sandwich"`` or ``"classic"``
+    (:data:`ERRORS`; ``"blocks"`` is :func:`block_covariance`).
 
-    Returns (cov, condition, reason, weak): ``weak`` flags the scalars that carry the
-    near-null directions of the column-scaled ``J^T J`` (eigenvalues below
-    :data:`NULL_EIGEN` of the largest; a component above 0.3 of the unit eigenvector),
-    i.e. the parameters the data do not identify on their own.
+    Returns (cov, condition, reason, weak): cov None with a reason where
+    :func:`conditioning` gives one, which also gives condition and weak.
     """
-    k = jtj.shape[0]
-    weak = np.zeros(k, bool)
-    if k == 0:
-        return None, float("nan"), "no free parameter", weak
-    if not np.all(np.isfinite(jtj)):
-        return None, float("inf"), "J^T J is not finite", weak
+    cond, reason, weak = conditioning(jtj)
+    if reason is not None:
+        return None, cond, reason, weak
     d = np.sqrt(np.diag(jtj))
-    if np.any(d == 0):
-        return None, float("inf"), "a parameter does not change the residuals", d == 0
-    scaled = jtj / np.outer(d, d)
-    ev, vec = np.linalg.eigh(scaled)
-    cond = float(ev[-1] / ev[0]) if ev[0] > 0 else float("inf")
-    small = ev < NULL_EIGEN * ev[-1]
-    weak = np.any(np.abs(vec[:, small]) > 0.3, axis=1) if small.any() else weak
-    if not np.isfinite(cond) or cond > SINGULAR:
-        return None, cond, f"J^T J is singular to working precision (condition {cond:.3g})", weak
-    bread = np.linalg.inv(scaled) / np.outer(d, d)
+    bread = np.linalg.inv(jtj / np.outer(d, d)) / np.outer(d, d)
     if method == "classic":
-        cov = bread * ee / max(n_data - k, 1)
+        cov = bread * ee / max(n_data - jtj.shape[0], 1)
     else:
         cov = bread @ meat @ bread
     return 0.5 * (cov + cov.T), cond, None, weak
+
+
+def _free_covariance(
+    obj: Objective, z: Array, prep: Prepared, act: np.ndarray, errors: str
+) -> tuple[np.ndarray | None, float, str | None, np.ndarray, float, int]:
+    """Covariance of the scalars not held on a bound (``act``) by ``errors``.
+
+    Returns (cov, condition, reason, weak) as :func:`covariance`, then the plain
+    residuals' ``r.r`` and the number of blocks (0 unless ``errors="blocks"``).
+    """
+    ix = np.ix_(act, act)
+    if errors != "blocks":
+        jtj, meat, ee, rr = (np.asarray(a) for a in objective_mod.natural_moments(obj, z, prep))
+        cov, cond, reason, weak = covariance(jtj[ix], meat[ix], float(ee), 3 * prep.n, errors)
+        return cov, cond, reason, weak, float(rr), 0
+    ids, n_blocks = block_index(prep)
+    moments = objective_mod.natural_block_moments(obj, z, prep, jnp.asarray(ids), n_blocks)
+    jtj, rr, scores, grams = (np.asarray(a) for a in moments)
+    cond, reason, weak = conditioning(jtj[ix])
+    cov = None
+    if reason is None:
+        cov, reason = block_covariance(jtj[ix], scores[:, act], grams[:, act][:, :, act])
+    return cov, cond, reason, weak, float(rr), n_blocks
 
 
 def assemble(
@@ -173,21 +211,9 @@ def assemble(
     cond, reason, weak_names, rss = float("nan"), None, [], float("nan")
     n_data, n_blocks = 3 * prep.n, 0
     if out.status is not Status.NONFINITE:
-        jtj, meat, ee, rr = (np.asarray(a) for a in objective_mod.natural_moments(obj, z, prep))
-        if errors == "blocks":
-            ids, n_blocks = block_index(prep)
-            scores, grams = (
-                np.asarray(a)
-                for a in objective_mod.block_moments(obj, z, prep, jnp.asarray(ids), n_blocks)
-            )
-        rss = max(float(rr), 1e-300)
         act = ~out.binding
-        cov_a, cond, reason, weak = covariance(
-            jtj[np.ix_(act, act)], meat[np.ix_(act, act)], float(ee), n_data, errors
-        )
-        if errors == "blocks" and cov_a is not None:
-            cov_a, reason = block_covariance(jtj[np.ix_(act, act)], scores[:, act],
-                                            grams[np.ix_(range(n_blocks), act, act)])  # fmt: skip
+        cov_a, cond, reason, weak, rr, n_blocks = _free_covariance(obj, z, prep, act, errors)
+        rss = max(rr, 1e-300)
         labels_act = [lab for lab, a in zip(layout.labels(), act, strict=True) if a]
         weak_names = [lab for lab, w in zip(labels_act, weak, strict=True) if w]
         if cov_a is not None:
@@ -265,7 +291,7 @@ def block_covariance(
     if g < MIN_BLOCKS:
         return None, f"{g} blocks for errors='blocks', fewer than {MIN_BLOCKS}"
     d = np.sqrt(np.diag(jtj))
-    ev, vec = np.linalg.eigh(jtj / np.outer(d, d))  # column-scaled, as in covariance()
+    ev, vec = np.linalg.eigh(jtj / np.outer(d, d))  # column-scaled, as in conditioning()
     inv_half = vec @ np.diag(ev**-0.5) @ vec.T
     u = np.empty_like(scores)
     for b in range(g):
