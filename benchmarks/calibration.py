@@ -55,6 +55,8 @@ low_e2):
   below 2e-5). Matched on ``add``. Both heteroscedastic models are first-order matches:
   ``f (1 + s eps)`` is log-normal only to first order, and under low_e2 its log is
   biased by up to ``-s^2/2`` on the peak (the results file shows what that does).
+* ``post_mixed`` (``sample()``'s default) has both scales, ``a_i`` and ``m_i`` above,
+  each sampled: it contains both of the previous two, so it is matched on either.
 
 Posterior convergence: a chain counts as converged when
 ``Posterior.require_converged(multiple=10)`` passes (kept steps >= 10 integrated
@@ -127,7 +129,7 @@ CUT_DEG = 80.0
 NOISE_LEVEL = {"mult": 0.05, "add": 0.02}
 """``mult``: relative sd; ``add``: sd as a share of the median noise-free ``f cos_i``."""
 METRICS = ("low_e2", "ngan")
-POSTERIOR_NOISES = ("constant", "multiplicative", "additive")
+POSTERIOR_NOISES = ("constant", "multiplicative", "additive", "mixed")
 MATCHED_POSTERIOR = {"mult": "multiplicative", "add": "additive"}
 Z95 = 1.959963984540054
 CONVERGED_MULTIPLE = 10.0
@@ -373,10 +375,11 @@ def _passes(post, multiple: float) -> bool:
 
 def _post_record(model, key: str | None, post, caught: list) -> dict:
     labs = labels_of(model)
-    if list(post.labels[:-1]) != labs:
+    k = len(post.labels) - len(labs)  # the noise scales: log_sigma, or _add and _mult
+    if list(post.labels[:-k]) != labs:
         raise RuntimeError(f"posterior labels {post.labels} differ from the model's {labs}")
     s = post.samples()
-    x = s[:, :-1]
+    x = s[:, :-k]
     perm, swapped = canonical_perm(model, key, x)
     x = np.take_along_axis(x, perm, axis=-1)
     q = np.quantile(x, (0.025, 0.5, 0.975), axis=0)
@@ -386,6 +389,9 @@ def _post_record(model, key: str | None, post, caught: list) -> dict:
         "q975": q[2].tolist(),
         "swapped_fraction": float(np.mean(swapped)),
         "sigma": float(np.exp(np.median(s[:, -1]))),
+        "sigmas": {
+            lab: float(np.exp(np.median(s[:, -k + j]))) for j, lab in enumerate(post.labels[-k:])
+        },
         "tau_max": float(np.max(post.autocorr_time)),
         "ess_min": float(np.min(post.ess)),
         "rhat_max": float(np.max(post.split_rhat())),
@@ -550,20 +556,25 @@ def new_setting(setting: str, cfg: Config) -> dict:
 def kinds_for(setting: str, posteriors: str) -> list[tuple[str, ...]]:
     """The interval kinds of ``setting`` in run phases: LM + matched, constant, other.
 
-    ``posteriors``: ``"plan"`` (:data:`POSTERIOR_PLAN`), ``"all"``, ``"matched"``, ``"none"``.
+    ``posteriors``: ``"plan"`` (:data:`POSTERIOR_PLAN`), ``"all"``, ``"matched"``,
+    ``"mixed"`` (sample()'s default noise model only), ``"none"``.
     """
     noise = SETTINGS[setting][1]
     matched = MATCHED_POSTERIOR[noise]
-    other = next(n for n in POSTERIOR_NOISES if n not in (matched, "constant"))
+    other = next(n for n in POSTERIOR_NOISES if n not in (matched, "constant", "mixed"))
     plan = {
         "plan": POSTERIOR_PLAN.get(setting, ()),
-        "all": ("matched", "constant", "other"),
+        "all": ("matched", "constant", "other", "mixed"),
         "matched": ("matched",),
+        "mixed": ("mixed",),
         "none": (),
     }[posteriors]
-    name = {"matched": matched, "constant": "constant", "other": other}
-    phases = [("lm_sandwich", "lm_classic") + (("post_" + matched,) if "matched" in plan else ())]
-    phases += [("post_" + name[p],) for p in ("constant", "other") if p in plan]
+    name = {"matched": matched, "constant": "constant", "other": other, "mixed": "mixed"}
+    first = [p for p in ("matched", "mixed") if p in plan][:1]
+    phases = [("lm_sandwich", "lm_classic") + tuple("post_" + name[p] for p in first)]
+    phases += [
+        ("post_" + name[p],) for p in ("constant", "other", "mixed") if p in plan and p not in first
+    ]
     return phases
 
 
@@ -671,10 +682,17 @@ def chance_outside(n: int, p: float = 0.95) -> float:
 
 def is_matched(noise: str, kind: str) -> bool:
     """Whether interval ``kind`` assumes what data noise ``noise`` is (module docstring)."""
-    return kind == "lm_sandwich" or kind == f"post_{MATCHED_POSTERIOR[noise]}"
+    return kind in ("lm_sandwich", "post_mixed") or kind == f"post_{MATCHED_POSTERIOR[noise]}"
 
 
-KIND_ORDER = ("lm_sandwich", "lm_classic", "post_constant", "post_multiplicative", "post_additive")
+KIND_ORDER = (
+    "lm_sandwich",
+    "lm_classic",
+    "post_constant",
+    "post_multiplicative",
+    "post_additive",
+    "post_mixed",
+)
 
 
 def _pct(x: float) -> str:
@@ -829,7 +847,7 @@ def main(argv: list[str] | None = None) -> None:
         help=f"comma-separated names or globs out of: {', '.join(SETTINGS)}",
     )  # fmt: skip
     ap.add_argument(
-        "--posteriors", default="plan", choices=("plan", "all", "matched", "none"),
+        "--posteriors", default="plan", choices=("plan", "all", "matched", "mixed", "none"),
         help="noise models sampled: 'plan' = each model case's own (walter all three, "
         "lafortune2 the matched one), or the same for every setting",
     )  # fmt: skip
