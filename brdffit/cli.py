@@ -220,6 +220,7 @@ def cmd_sweep(args) -> None:
         seed=args.seed,
         jobs=args.jobs,
         progress=not args.no_progress,
+        simplify=args.simplify,
     )
     print(
         f"{s.out}: {s.n_tasks} tasks, {s.n_skipped} already done, {s.n_done} fitted now "
@@ -268,6 +269,7 @@ def cmd_simplify(args) -> None:
         criterion=args.criterion,
         folds=args.folds,
         n_se=args.n_se,
+        min_gain=args.min_gain,
         cut_deg=args.cut,
         seed=args.seed,
         freeze=_freeze(args.freeze),
@@ -408,6 +410,14 @@ def build_parser() -> argparse.ArgumentParser:
     )
     s.add_argument("--seed", type=int, default=0)
     s.add_argument("--jobs", type=int, default=None, help="worker processes (default: cores)")
+    s.add_argument(
+        "--simplify",
+        nargs="?",
+        const="cv",
+        choices=["cv", "bic"],
+        help="after each fit, leave out the features the data do not support (criterion, "
+        "default cv); stored in each result file",
+    )
     s.add_argument("--no-progress", action="store_true")
     s.add_argument("--families", metavar="CSV", help=FAMILIES_HELP)
     s.set_defaults(func=cmd_sweep)
@@ -433,11 +443,23 @@ def build_parser() -> argparse.ArgumentParser:
         "--criterion",
         default="cv",
         choices=["cv", "bic"],
-        help="cv: held-out loss over blocks of cells, one-SE rule; bic: n = residuals",
+        help="cv: held-out loss over blocks of cells, a paired t-test over the folds; "
+        "bic: n = residuals",
     )
     s.add_argument("--folds", type=int, default=5, help="cross-validation folds")
     s.add_argument(
-        "--n-se", type=float, default=1.0, help="cv: tolerance in standard errors (1: one-SE rule)"
+        "--n-se",
+        type=float,
+        default=None,
+        help="cv: a feature stays when its t exceeds this (default: Student's t quantile "
+        "0.95 for folds - 1 degrees of freedom, 2.13 for 5 folds; 1: the one-SE rule)",
+    )
+    s.add_argument(
+        "--min-gain",
+        type=float,
+        default=0.01,
+        help="cv: a feature stays only when it lowers the held-out loss by more than this "
+        "fraction (default 0.01)",
     )
     s.add_argument("--format", default="text", choices=["text", "markdown"])
     s.add_argument("--json", metavar="OUT", help="write the path and both fits as JSON")

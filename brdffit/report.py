@@ -28,6 +28,7 @@ from brdffit.crossrank import (
 from brdffit.families import read_families
 from brdffit.pareto import error_vs_time, pareto_caption, pareto_figure, pareto_table
 from brdffit.rank import LOSS_RTOL, NOTE, PER_SAMPLE
+from brdffit.survival import survival_table
 
 MAX_INLINE_ROWS = 200
 
@@ -162,6 +163,9 @@ def write_report(
         else:
             lines += [f"{n_rows} rows: see [per_material_{metric}.csv](per_material_{metric}.csv)."]
             lines += [""]
+    survivors = survival_table(sweep_dir)  # "" unless the sweep ran with --simplify
+    if survivors:
+        lines += ["## Model reduction (sweep --simplify)", "", survivors, ""]
     lines += _errors(res)
     path = out / "report.md"
     write_text(path, "\n".join(lines).rstrip() + "\n")

@@ -332,6 +332,10 @@ def run_task(task: Task, out: str) -> dict:
             eval_n=s["eval_n"],
             provenance=provenance(),
         )
+        if s.get("simplify"):  # brdffit sweep --simplify: the reduction after the fit
+            from brdffit.survival import sweep_reduction
+
+            d["simplify"] = sweep_reduction(model, data, task.metric, r, s)
         write_json(path, d)
         err_path.unlink(missing_ok=True)
         return {"ok": True, "converged": r.converged, "task": path.name}
@@ -341,8 +345,13 @@ def run_task(task: Task, out: str) -> dict:
         return {"ok": False, "converged": False, "task": path.name, "error": str(e)}
 
 
-def is_finished(path: Path) -> bool:
-    """True when ``path`` is a result file that parses and has a loss."""
+def is_finished(path: Path, simplify: str | None = None) -> bool:
+    """True when ``path`` is a result file that parses and has a loss (and, with
+    ``simplify``, a reduction made with that criterion: :func:`brdffit.survival.has_reduction`)."""
+    if simplify:
+        from brdffit.survival import has_reduction
+
+        return has_reduction(path, simplify)
     return has_key(path, "loss")
 
 
@@ -396,6 +405,7 @@ def run_sweep(
     seed: int = 0,
     max_steps: int = 512,
     eval_n: int = 65536,
+    simplify: str | None = None,
     jobs: int | None = None,
     progress: bool = True,
 ) -> SweepSummary:
@@ -411,6 +421,11 @@ def run_sweep(
       :func:`brdffit.fit` and :func:`brdffit.loading.load_measurements`; a resumed
       sweep must use the same values (else :class:`SweepError`).
     - ``eval_n``: samples of the evaluation-cost timing (module docstring).
+    - ``simplify``: ``"cv"`` or ``"bic"`` runs :func:`brdffit.simplify` with that criterion
+      after each fit and stores its record in the task's file under ``"simplify"``
+      (:func:`brdffit.survival.sweep_reduction`; read them with
+      :func:`brdffit.survival.survival_table`). A finished fit without that record is done
+      again, so ``--simplify`` can be added to a finished sweep.
     - ``jobs``: worker processes (default ``os.cpu_count()``); 1 runs in this process.
     - ``progress``: show a tqdm bar (tasks, materials finished, time left).
 
@@ -436,11 +451,17 @@ def run_sweep(
         max_steps=max_steps,
     )  # fmt: skip
     settings["eval_n"] = eval_n
+    if simplify is not None:
+        from brdffit.simplify import CRITERIA
+
+        if simplify not in CRITERIA:
+            raise SweepError(f"simplify={simplify!r}: use one of {', '.join(CRITERIA)}")
+        settings["simplify"] = simplify
     out.mkdir(parents=True, exist_ok=True)
     _write_manifest(out, materials, labels, metrics, settings)
     remove_temporaries(out)
     tasks = [Task(m, mo, me, settings) for m in materials for mo in labels for me in metrics]
-    todo = [t for t in tasks if not is_finished(t.path(out))]
+    todo = [t for t in tasks if not is_finished(t.path(out), simplify)]
     left = {m.name: sum(t.material.name == m.name for t in todo) for m in materials}
     counts = {"done": 0, "unconverged": 0, "errors": 0}
     bar = _progress_bar(len(todo), len(materials), sum(v == 0 for v in left.values()), progress)

@@ -1,17 +1,24 @@
 """Variants of a model one move simpler, and where a parent's optimum starts them.
 
-Used by :func:`brdffit.simplify`: parameter names across a lobe removed
-(:func:`renumber`), across an axis merged (:func:`axisless`, ``alpha_x`` -> ``alpha``),
-and the start rows of a child model from its parent's fitted rows (:func:`start_rows`).
+Used by :func:`brdffit.simplify`: the options one move simpler (:func:`option_moves`) and
+the features a model has that a move can remove (:func:`features`), parameter names
+across a lobe removed (:func:`renumber`), across an axis merged (:func:`axisless`,
+``alpha_x`` -> ``alpha``), and the start rows of a child model from its parent's fitted
+rows (:func:`start_rows`).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import re
+from collections.abc import Collection
 
 import numpy as np
 
+from brdffit import models
 from brdffit.abstract_model import AbstractModel
+from brdffit.errors import ParameterError
+from brdffit.models._grey import Grey
 
 _INDEX = re.compile(r"^(.*)_(\d+)$")
 _AXIS = re.compile(r"_?(xy|x|y)(?=_|$)")
@@ -63,3 +70,41 @@ def scalar_count(model: AbstractModel) -> int:
 def rgb_names(model: AbstractModel) -> set[str]:
     """Names of ``model``'s RGB parameters."""
     return {p.name for p in model.parameters if p.shape == (3,)}
+
+
+def option_moves(model: AbstractModel):
+    """The static options of ``model`` (its base, for a grey variant) whose change gives
+    strictly fewer free scalars: ``(field, new value, child base model)`` for every
+    boolean flipped and every lobe count ``n_...`` lowered by one. Options the model
+    refuses (a typed :class:`~brdffit.errors.ParameterError`) are skipped."""
+    base = model.base if isinstance(model, Grey) else model
+    opts, size = base.options(), scalar_count(base)
+    for f in dataclasses.fields(base):
+        v = getattr(base, f.name)
+        if isinstance(v, bool):
+            new = not v
+        elif isinstance(v, int) and f.name.startswith("n_") and v > 1:
+            new = v - 1
+        else:
+            continue
+        try:
+            child = models.get(base.name, **{**opts, f.name: new})
+        except ParameterError:
+            continue
+        if scalar_count(child) < size:
+            yield f.name, new, child
+
+
+def features(model: AbstractModel, frozen: Collection[str] = ()) -> tuple[str, ...]:
+    """The features of ``model`` that one move of :func:`brdffit.simplify` can remove, in
+    table order: a boolean option that is on (``clearcoat``; ``name=false`` for one
+    whose off state is the richer), a lobe count above 1 (``n_lobes=2``), an RGB
+    parameter not in ``frozen`` (``RGB kd``)."""
+    out = []
+    for name, new, _ in option_moves(model):
+        if isinstance(new, bool):
+            out.append(name if not new else f"{name}=false")
+        else:
+            out.append(f"{name}={new + 1}")
+    out += [f"RGB {p.name}" for p in model.parameters if p.shape == (3,) and p.name not in frozen]
+    return tuple(out)
