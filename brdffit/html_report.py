@@ -305,6 +305,7 @@ def sweep_html(
     from brdffit.pareto import error_vs_time, pareto_caption, pareto_figure, pareto_table
     from brdffit.rank import NOTE, TIES
     from brdffit.report import MAX_INLINE_ROWS
+    from brdffit.survival import survival_table
 
     res = load_sweep(sweep_dir, read_families(families) if families else None)
     title = f"brdffit sweep report: {Path(sweep_dir).resolve().name}"
@@ -332,6 +333,12 @@ def sweep_html(
                 f'<p class="note">{len(mx.materials) * len(mx.models)} rows: see '
                 f"report/per_material_{html.escape(metric)}.csv.</p>"
             )
+    survivors = survival_table(sweep_dir, fmt="text")  # "" unless the sweep ran --simplify
+    if survivors:
+        body += [
+            "<h2>Model reduction (sweep --simplify)</h2>",
+            f"<pre>{html.escape(survivors)}</pre>",
+        ]
     if res.errors:
         rows = [
             [e["material"], e["model"], e["metric"], f"{e['error']}: {e.get('message', '')}"]

@@ -21,6 +21,7 @@ from brdffit import ParameterError, Reduction, metrics, models, simplify, synthe
 from brdffit.cli import main
 from brdffit.errors import SweepError
 from brdffit.folds import deal_blocks, fold_t, keep_threshold, sign_count
+from brdffit.html_report import write_sweep_html
 from brdffit.report import write_report
 from brdffit.survival import has_reduction, survival_table
 from brdffit.sweep import run_sweep, synthetic_materials
@@ -187,6 +188,8 @@ def test_sweep_simplify_stores_the_reduction_resumes_and_tables_the_survivors(tm
     assert f"| walter | low_e2 | RGB kd | {n_kd} of 2 |" in text
     report = write_report(out, n_boot=50).read_text()  # the sweep report carries the table
     assert "## Model reduction (sweep --simplify)" in report and text.strip() in report
+    page = write_sweep_html(out, n_boot=50).read_text()
+    assert "Model reduction (sweep --simplify)" in page and "syn00-plastic" in page
     with pytest.raises(SweepError, match="simplify='aic'"):
         run_sweep(out, synthetic_materials(2), ["walter"], ["low_e2"], stride=STRIDE,
                   simplify="aic", jobs=1, progress=False)  # fmt: skip
