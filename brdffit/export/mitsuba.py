@@ -298,6 +298,11 @@ def generic_alpha(p: Mapping[str, np.ndarray]) -> float:
     return float(np.sqrt(2.0 / (float(n) + 2.0))) if n is not None else 0.2
 
 
+def _ward(model: AbstractModel, p: Mapping[str, np.ndarray]) -> list[Start]:
+    ax, ay = _alphas(p, "alpha")
+    return [_conductor_start("beckmann", ax, ay, p.get("kd"), p["ks"], np.ones(3))]
+
+
 def _generic(model: AbstractModel, p: Mapping[str, np.ndarray]) -> list[Start]:
     kd = np.asarray(_first(p, ("kd", "rd", "rho", "albedo", "base_color"), np.full(3, 0.5)))
     alpha = float(np.clip(np.mean(generic_alpha(p)), 1e-3, 1.0))
@@ -317,10 +322,8 @@ def candidates(model: AbstractModel, p: Mapping[str, np.ndarray]) -> list[Start]
         "disney": _disney,
         "filament": _filament,
         "course_cook_torrance": _course,
+        "ward": _ward,
     }
-    if model.name == "ward":
-        ax, ay = _alphas(p, "alpha")
-        return [_conductor_start("beckmann", ax, ay, p.get("kd"), p["ks"], np.ones(3))]
     return table.get(model.name, _generic)(model, p)
 
 
