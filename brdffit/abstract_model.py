@@ -126,9 +126,10 @@ class AbstractModel(eqx.Module):
         lines = [f"{self.name}  ({self.reference})", f"  options: {opts}"]
         for p in self.parameters:
             shape = "rgb" if p.shape == (3,) else "scalar"
+            neutral = "" if p.neutral is None else f"; neutral {p.neutral:.3g}"
             lines.append(
                 f"  {p.name:<14} {shape:<6} [{p.bounds[0]:.3g}, {p.bounds[1]:.3g}] "
-                f"default {p.default:<8.3g} {p.transform:<8} {p.doc}"
+                f"default {p.default:<8.3g} {p.transform:<8} {p.doc}{neutral}"
             )
         return "\n".join(lines)
 

@@ -42,7 +42,11 @@ class Parameter:
     meaning with its unit; ``linear`` True when the BRDF is affine in the parameter
     (albedos, Fresnel F0), so a linear least-squares solve can start it; ``solver``
     the least-squares solver's space when the transform does not say it
-    (:attr:`solver_log`).
+    (:attr:`solver_log`); ``neutral`` the value at which the parameter adds nothing to
+    a simpler published form of the model (Disney's ``specular`` 0.5, the common
+    dielectric F0 0.04; the Student-t shape ``gamma`` 2, which is GGX) or ``None``:
+    :func:`brdffit.simplify` may pin it there, the spec option ``neutral``
+    (:mod:`brdffit.models._restrict`).
     """
 
     name: str
@@ -53,6 +57,7 @@ class Parameter:
     doc: str
     linear: bool = False
     solver: Literal["natural", "log"] | None = None
+    neutral: float | None = None
 
     def __post_init__(self) -> None:
         lo, hi = self.bounds
@@ -61,6 +66,10 @@ class Parameter:
         if not lo <= self.default <= hi:
             raise ParameterError(
                 f"parameter {self.name!r}: default {self.default} outside bounds {self.bounds}"
+            )
+        if self.neutral is not None and not lo <= self.neutral <= hi:
+            raise ParameterError(
+                f"parameter {self.name!r}: neutral {self.neutral} outside bounds {self.bounds}"
             )
         if self.transform == "logit" and not (math.isfinite(lo) and math.isfinite(hi)):
             raise ParameterError(f"parameter {self.name!r}: 'logit' needs finite bounds")

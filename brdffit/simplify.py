@@ -10,7 +10,7 @@ fits every variant one move simpler, keeping the best if the criterion allows it
 * an integer lobe count ``n_...`` lowered by one (Lafortune's and Kurt's ``n_lobes``);
   every lobe is tried as the one dropped and the cheapest start is kept;
 * an RGB parameter made grey, one value for the three channels
-  (:mod:`brdffit.models._grey`, the spec option ``grey=a+b``).
+  (:mod:`brdffit.models._restrict`, the spec option ``grey=a+b``).
 
 Each variant starts from its parent's optimum (removed parameters dropped, a grey one
 the mean of its channels, a lobe count's later lobes renumbered, a new parameter the
@@ -120,7 +120,7 @@ from brdffit.errors import ParameterError
 from brdffit.fit import fit
 from brdffit.folds import MIN_GAIN, deal_blocks, feature_test, fold_t, keep_threshold
 from brdffit.measurements import Measurements
-from brdffit.models._grey import Grey, make_grey
+from brdffit.models._restrict import Restricted, make_grey
 from brdffit.objective import Objective
 from brdffit.reduction import PathRow, Reduction
 from brdffit.result import FitResult
@@ -352,7 +352,7 @@ class _Search:
 
     def moves_of(self, model: AbstractModel, rows: dict[str, np.ndarray]):
         """Every variant one move simpler than ``model`` fitted at ``rows`` (:meth:`moves`)."""
-        grey = model.names if isinstance(model, Grey) else ()
+        grey = model.grey if isinstance(model, Restricted) else ()
         size = scalar_count(model)
         for name, new, child_base in option_moves(model):
             drops = range(1, new + 2) if not isinstance(new, bool) else (None,)

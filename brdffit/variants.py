@@ -18,7 +18,7 @@ import numpy as np
 from brdffit import models
 from brdffit.abstract_model import AbstractModel
 from brdffit.errors import ParameterError
-from brdffit.models._grey import Grey
+from brdffit.models._restrict import base_of
 
 _INDEX = re.compile(r"^(.*)_(\d+)$")
 _AXIS = re.compile(r"_?(xy|x|y)(?=_|$)")
@@ -73,11 +73,11 @@ def rgb_names(model: AbstractModel) -> set[str]:
 
 
 def option_moves(model: AbstractModel):
-    """The static options of ``model`` (its base, for a grey variant) whose change gives
+    """The static options of ``model`` (its base, for a restricted variant) whose change gives
     strictly fewer free scalars: ``(field, new value, child base model)`` for every
     boolean flipped and every lobe count ``n_...`` lowered by one. Options the model
     refuses (a typed :class:`~brdffit.errors.ParameterError`) are skipped."""
-    base = model.base if isinstance(model, Grey) else model
+    base = base_of(model)
     opts, size = base.options(), scalar_count(base)
     for f in dataclasses.fields(base):
         v = getattr(base, f.name)

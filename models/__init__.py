@@ -12,10 +12,12 @@ name plus the options that differ from the defaults, in field order, so
 ``from_spec(label(m))`` rebuilds ``m``. Sweeps and rankings name models by their label.
 Values are ``true``/``false``, integers, floats or bare words (letters, digits, ``_.+-``).
 
-Every model also takes the option ``grey``: RGB parameters tied to one value for the
-three channels, named joined by ``+`` (``walter[diffuse=false,grey=ks+f0]``). It is
-not a field of the model class: :func:`get` wraps the model in
-:class:`brdffit.models._grey.Grey` and :func:`label` writes it last (see that module).
+Every model also takes the options ``grey`` (RGB parameters tied to one value for the
+three channels) and ``neutral`` (parameters pinned at their neutral value), each naming
+parameters joined by ``+`` (``walter[diffuse=false,grey=ks+f0]``,
+``disney[clearcoat=false,neutral=specular]``). They are not fields of the model class:
+:func:`get` wraps the model in :class:`brdffit.models._restrict.Restricted` and
+:func:`label` writes them last (see that module).
 """
 
 from __future__ import annotations
@@ -26,7 +28,7 @@ import pkgutil
 import re
 from collections.abc import Mapping
 
-from brdffit.models import _grey
+from brdffit.models import _restrict
 
 from brdffit.abstract_model import AbstractModel
 from brdffit.errors import ParameterError
@@ -61,17 +63,18 @@ def get(name: str, **options: object) -> AbstractModel:
     """Build the model ``name`` with static ``options`` (see each model's fields).
 
     ``grey`` (names joined by ``+``, or a sequence) ties those RGB parameters across
-    channels (:func:`brdffit.models._grey.make_grey`). Raises
+    channels, ``neutral`` pins those parameters at their neutral values
+    (:func:`brdffit.models._restrict.restrict`). Raises
     :class:`~brdffit.errors.ParameterError` naming the unknown model or option and
     listing what is accepted.
     """
     if name not in _REGISTRY:
         raise ParameterError(f"unknown model {name!r}; available: {', '.join(_REGISTRY)}")
-    if _grey.OPTION in options:
-        grey = options.pop(_grey.OPTION)
-        return _grey.make_grey(get(name, **options), grey)
+    if any(k in options for k in _restrict.OPTIONS):
+        grey, neutral = (options.pop(k, ()) for k in _restrict.OPTIONS)
+        return _restrict.restrict(get(name, **options), grey=grey, neutral=neutral)
     cls = _REGISTRY[name]
-    accepted = [f.name for f in dataclasses.fields(cls)] + [_grey.OPTION]
+    accepted = [f.name for f in dataclasses.fields(cls)] + list(_restrict.OPTIONS)
     bad = sorted(set(options) - set(accepted))
     if bad:
         raise ParameterError(
@@ -181,9 +184,9 @@ def _text(value: object) -> str:
 
 def changed_options(model: AbstractModel) -> dict[str, object]:
     """The static options of ``model`` that differ from its class's defaults, in field order
-    (then ``grey`` for a grey variant)."""
-    if isinstance(model, _grey.Grey):
-        return {**changed_options(model.base), _grey.OPTION: model.grey_text}
+    (then ``grey`` and ``neutral`` for a restricted variant)."""
+    if isinstance(model, _restrict.Restricted):
+        return {**changed_options(model.base), **_restrict.restriction_options(model)}
     return {
         f.name: getattr(model, f.name)
         for f in dataclasses.fields(model)

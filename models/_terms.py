@@ -17,6 +17,13 @@ import jax.numpy as jnp
 from brdffit.parameters import Parameter, Params
 
 INV_PI = 0.3183098861837907
+DIELECTRIC_F0 = 0.04
+"""Normal-incidence reflectance of a common dielectric, ``((1.5 - 1) / (1.5 + 1))^2``:
+glass, plastics and paints reflect 2-5% (Hoffman, "Background: Physics and Math of
+Shading", SIGGRAPH 2013 course notes, table of F0 values); the neutral value of every
+Schlick ``F0`` (Disney's ``specular`` 0.5 and Filament's ``reflectance`` 0.5 mean it)."""
+DIELECTRIC_ETA = 1.5
+"""Relative index of refraction of that common dielectric: the neutral ``eta``."""
 
 F0 = Parameter(
     "f0",
@@ -26,6 +33,7 @@ F0 = Parameter(
     "logit",
     "Fresnel reflectance at normal incidence, RGB",
     linear=True,
+    neutral=DIELECTRIC_F0,
 )
 # With ks, f0 multiplies ks: the model is affine in each alone, not in both, so only
 # ks is solved linearly.

@@ -35,7 +35,7 @@ from typing import ClassVar, final
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-from brdffit.models._terms import INV_PI, log_cos_theta_h, schlick_fresnel
+from brdffit.models._terms import DIELECTRIC_F0, INV_PI, log_cos_theta_h, schlick_fresnel
 
 from brdffit.abstract_model import AbstractModel
 from brdffit.geometry import ShadingGeometry
@@ -43,8 +43,9 @@ from brdffit.parameters import Parameter, Params
 
 RD = Parameter("rd", (3,), (0.0, 1.0), 0.3, "logit", "diffuse albedo Rd, RGB", linear=True)
 RS = Parameter(
-    "rs", (3,), (0.0, 1.0), 0.05, "logit", "specular reflectance at normal incidence Rs, RGB"
-)
+    "rs", (3,), (0.0, 1.0), 0.05, "logit", "specular reflectance at normal incidence Rs, RGB",
+    neutral=DIELECTRIC_F0,
+)  # fmt: skip
 N = Parameter("n", (), (0.1, 1e5), 100.0, "log", "Phong exponent, unitless")
 NU = Parameter("nu", (), (0.1, 1e5), 100.0, "log", "Phong exponent along the tangent x")
 NV = Parameter("nv", (), (0.1, 1e5), 100.0, "log", "Phong exponent along the bitangent y")

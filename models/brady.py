@@ -37,7 +37,7 @@ from typing import ClassVar, final
 
 import jax
 import jax.numpy as jnp
-from brdffit.models._terms import lambert
+from brdffit.models._terms import DIELECTRIC_F0, lambert
 
 from brdffit.abstract_model import AbstractModel
 from brdffit.geometry import ShadingGeometry
@@ -54,7 +54,15 @@ PARAMETERS = (
         "specular scale rho_s, RGB, 1/sr at the peak (not an albedo)",
         linear=True,
     ),
-    Parameter("f0", (), (0.0, 1.0), 0.04, "logit", "Schlick reflectance at normal incidence"),
+    Parameter(
+        "f0",
+        (),
+        (0.0, 1.0),
+        0.04,
+        "logit",
+        "Schlick reflectance at normal incidence",
+        neutral=DIELECTRIC_F0,
+    ),
     Parameter("beta", (), (1e-2, 2.0), 0.3, "log", "lobe width; tan(theta_h) scale is beta^2"),
     Parameter("exponent", (), (0.2, 8.0), 1.0, "log", "lobe shape exponent a, unitless"),
 )

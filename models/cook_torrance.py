@@ -47,8 +47,14 @@ KS = Parameter("ks", (3,), (0.0, 1.0), 0.5, "logit", "specular weight s, RGB", l
 M = Parameter("m", (), (1e-4, 2.0), 0.2, "log", "Beckmann rms slope m, unitless")
 # f0 enters affinely alone but multiplies ks, so it is not marked linear (a joint linear
 # solve over ks and f0 would be wrong).
-F0 = Parameter("f0", (3,), (0.0, 1.0), 0.04, "logit", "Schlick reflectance at normal incidence")
-ETA_D = Parameter("eta", (), (1.01, 3.0), 1.5, "log", "relative index of refraction, unitless")
+F0 = Parameter(
+    "f0", (3,), (0.0, 1.0), 0.04, "logit", "Schlick reflectance at normal incidence",
+    neutral=_terms.DIELECTRIC_F0,
+)  # fmt: skip
+ETA_D = Parameter(
+    "eta", (), (1.01, 3.0), 1.5, "log", "relative index of refraction, unitless",
+    neutral=_terms.DIELECTRIC_ETA,
+)  # fmt: skip
 ETA_C = Parameter("eta", (3,), (0.01, 6.0), 0.2, "log", "real part of the complex index, RGB")
 K_C = Parameter("k", (3,), (1e-3, 15.0), 3.0, "log", "extinction coefficient k, RGB")
 FRESNEL = ("schlick", "dielectric", "conductor")

@@ -41,7 +41,10 @@ from brdffit.abstract_model import AbstractModel
 from brdffit.geometry import ShadingGeometry
 from brdffit.parameters import Parameter, Params
 
-F0 = Parameter("f0", (3,), (0.0, 1.0), 0.04, "logit", "Fresnel reflectance F0, RGB")
+F0 = Parameter(
+    "f0", (3,), (0.0, 1.0), 0.04, "logit", "Fresnel reflectance F0, RGB",
+    neutral=_terms.DIELECTRIC_F0,
+)  # fmt: skip
 METALLIC = Parameter("metallic", (), (0.0, 1.0), 0.5, "logit", "metalness, unitless")
 ROUGHNESS = Parameter("roughness", (), (0.01, 1.0), 0.5, "log", "roughness, alpha = roughness^2")
 

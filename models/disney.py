@@ -43,21 +43,26 @@ from typing import ClassVar, final
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-from brdffit.models._terms import INV_PI, ggx_d
+from brdffit.models._terms import DIELECTRIC_F0, INV_PI, ggx_d
 
 from brdffit.abstract_model import AbstractModel
 from brdffit.geometry import ShadingGeometry
 from brdffit.parameters import Parameter, Params
 
 
-def _unit(name: str, default: float, doc: str, linear: bool = False) -> Parameter:
-    return Parameter(name, (), (0.0, 1.0), default, "logit", doc, linear=linear)
+def _unit(
+    name: str, default: float, doc: str, linear: bool = False, neutral: float | None = None
+) -> Parameter:
+    return Parameter(name, (), (0.0, 1.0), default, "logit", doc, linear=linear, neutral=neutral)
 
 
 BASE_COLOR = Parameter("base_color", (3,), (0.0, 1.0), 0.5, "logit", "base colour, linear RGB")
 METALLIC = _unit("metallic", 0.1, "metallic blend, 0 dielectric .. 1 metal, unitless")
 SUBSURFACE = _unit("subsurface", 0.1, "blend Burley diffuse -> Hanrahan-Krueger, unitless")
-SPECULAR = _unit("specular", 0.5, "dielectric specular, F0 = .08 specular, unitless", True)
+SPECULAR = _unit(
+    "specular", 0.5, "dielectric specular, F0 = .08 specular, unitless", True,
+    neutral=DIELECTRIC_F0 / 0.08,  # 0.5, the paper's default: F0 = 0.04
+)  # fmt: skip
 ROUGHNESS = Parameter(
     "roughness",
     (),
@@ -70,7 +75,7 @@ ROUGHNESS = Parameter(
 SPECULAR_TINT = _unit("specular_tint", 0.1, "tint of the dielectric F0 toward C_tint")
 ANISOTROPIC = _unit("anisotropic", 0.1, "anisotropy, aspect = sqrt(1 - .9 anisotropic)")
 SHEEN = _unit("sheen", 0.1, "sheen strength (grazing F_H lobe), unitless", True)
-SHEEN_TINT = _unit("sheen_tint", 0.5, "tint of the sheen toward C_tint, unitless")
+SHEEN_TINT = _unit("sheen_tint", 0.5, "tint of the sheen toward C_tint, unitless", neutral=0.0)
 CLEARCOAT = _unit("clearcoat", 0.1, "clear-coat strength (lobe scaled by 1/4), unitless", True)
 CLEARCOAT_GLOSS = _unit("clearcoat_gloss", 0.9, "clear-coat gloss, alpha = mix(.1, .001, .)")
 

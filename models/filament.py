@@ -41,6 +41,7 @@ subsurface; not energy conserving (``f0`` up to 1 and the diffuse are added unco
 
 from __future__ import annotations
 
+import math
 from typing import ClassVar, Literal, final
 
 import equinox as eqx
@@ -63,13 +64,18 @@ def _color(name: str, default: float, doc: str, linear: bool = True) -> Paramete
     return Parameter(name, (3,), (0.0, 1.0), default, "logit", doc, linear=linear)
 
 
-def _unit(name: str, default: float, doc: str, low: float = 0.0) -> Parameter:
-    return Parameter(name, (), (low, 1.0), default, "logit", doc)
+def _unit(
+    name: str, default: float, doc: str, low: float = 0.0, neutral: float | None = None
+) -> Parameter:
+    return Parameter(name, (), (low, 1.0), default, "logit", doc, neutral=neutral)
 
 
 ROUGHNESS = _rough("roughness", 0.5, "perceptual roughness, alpha = roughness^2")
-METALLIC = _unit("metallic", 0.5, "metallic (0 dielectric, 1 conductor), unitless")
-REFLECTANCE = _unit("reflectance", 0.5, "dielectric reflectance, f0 = 0.16 reflectance^2")
+METALLIC = _unit("metallic", 0.5, "metallic (0 dielectric, 1 conductor), unitless", neutral=0.0)
+REFLECTANCE = _unit(
+    "reflectance", 0.5, "dielectric reflectance, f0 = 0.16 reflectance^2",
+    neutral=math.sqrt(_terms.DIELECTRIC_F0 / 0.16),  # 0.5, Filament's default: f0 = 0.04
+)  # fmt: skip
 ANISOTROPY = _unit("anisotropy", 0.0, "anisotropy, > 0 stretches along x, unitless", -1.0)
 CLEAR_COAT = _unit("clear_coat", 0.5, "clear coat strength, unitless")
 CLEAR_COAT_ROUGHNESS = _rough("clear_coat_roughness", 0.2, "clear coat perceptual roughness")

@@ -32,7 +32,7 @@ from typing import ClassVar, final
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-from brdffit.models._terms import beckmann_d, lambert
+from brdffit.models._terms import DIELECTRIC_F0, beckmann_d, lambert
 
 from brdffit.abstract_model import AbstractModel
 from brdffit.geometry import ShadingGeometry
@@ -51,7 +51,10 @@ def lobe_parameters(l: int, anisotropic: bool) -> tuple[Parameter, ...]:
     ks = Parameter(
         f"ks_{l}", (3,), (0.0, 1.0), 0.3, "logit", f"lobe {l} specular scale, RGB", linear=True
     )
-    f0 = Parameter(f"f0_{l}", (), (0.0, 1.0), 0.1, "logit", f"lobe {l} Schlick F0, unitless")
+    f0 = Parameter(
+        f"f0_{l}", (), (0.0, 1.0), 0.1, "logit", f"lobe {l} Schlick F0, unitless",
+        neutral=DIELECTRIC_F0,
+    )  # fmt: skip
     if anisotropic:
         rough = (
             Parameter(

@@ -73,7 +73,15 @@ PARAMETERS = (
     ),
     Parameter("B", (), (0.1, 1e8), 100.0, "log", "ABC curve width parameter, unitless"),
     Parameter("C", (), (1e-3, 10.0), 1.5, "log", "ABC curve fall-off exponent, unitless"),
-    Parameter("eta", (), (1.01, 100.0), 1.5, "log", "relative index of refraction, unitless"),
+    Parameter(
+        "eta",
+        (),
+        (1.01, 100.0),
+        1.5,
+        "log",
+        "relative index of refraction, unitless",
+        neutral=_terms.DIELECTRIC_ETA,
+    ),
 )
 
 

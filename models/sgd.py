@@ -65,7 +65,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from brdffit.models._terms import INV_PI, lambert
+from brdffit.models._terms import DIELECTRIC_F0, INV_PI, lambert
 
 from brdffit.abstract_model import AbstractModel
 from brdffit.geometry import ShadingGeometry
@@ -81,8 +81,13 @@ KS = Parameter(
     "specular scale rho_s, RGB (4 ks / pi is the lobe's albedo at normal incidence, F = G = 1)",
     linear=True,
 )
-F0 = Parameter("f0", (3,), (0.0, 1.0), 0.1, "logit", "Fresnel F0 (Schlick base), RGB")
-F1 = Parameter("f1", (3,), (-1.0, 1.0), 0.0, "logit", "Fresnel F1 (linear term), RGB")
+F0 = Parameter(
+    "f0", (3,), (0.0, 1.0), 0.1, "logit", "Fresnel F0 (Schlick base), RGB", neutral=DIELECTRIC_F0
+)
+F1 = Parameter(
+    "f1", (3,), (-1.0, 1.0), 0.0, "logit", "Fresnel F1 (linear term), RGB",
+    neutral=0.0,  # F1 = 0 is Schlick's Fresnel
+)  # fmt: skip
 SHAPE = {
     "alpha": ((1e-5, 2.0), 0.05, "log", "SGD roughness alpha (slope scale sqrt(alpha))"),
     "p": ((0.0, 2.0), 0.5, "logit", "SGD shift exponent p (0: Beckmann; tail weight)"),

@@ -69,17 +69,21 @@ from brdffit.parameters import Parameter, Params
 
 KD = Parameter("kd", (3,), (0.0, 1.0), 0.3, "logit", "diffuse albedo rho_d, RGB", linear=True)
 KS = Parameter("ks", (3,), (0.0, 1.0), 0.5, "logit", "specular albedo rho_s, RGB", linear=True)
-ETA = Parameter("eta", (), (1.01, 50.0), 1.5, "log", "refractive index n_i for Fresnel")
+ETA = Parameter(
+    "eta", (), (1.01, 50.0), 1.5, "log", "refractive index n_i for Fresnel",
+    neutral=_terms.DIELECTRIC_ETA,
+)  # fmt: skip
 F0 = Parameter(
     "f0", (3,), (0.0, 1.0), 0.04, "logit", "Schlick reflectance at normal incidence, RGB",
-    linear=True,
+    linear=True, neutral=_terms.DIELECTRIC_F0,
 )  # fmt: skip
 ALPHA = Parameter("alpha", (), (1e-4, 2.0), 0.2, "log", "roughness alpha, unitless")
 ALPHA_X = Parameter("alpha_x", (), (1e-4, 2.0), 0.2, "log", "roughness along the tangent x")
 ALPHA_Y = Parameter("alpha_y", (), (1e-4, 2.0), 0.2, "log", "roughness along the bitangent y")
 GAMMA = Parameter(
-    "gamma", (), (1.51, 100.0), 2.0, "log", "Student-t shape: 2 is GGX, large is Beckmann"
-)
+    "gamma", (), (1.51, 100.0), 2.0, "log", "Student-t shape: 2 is GGX, large is Beckmann",
+    neutral=2.0,  # STD with gamma = 2 is GGX (Ribardiere et al. 2017)
+)  # fmt: skip
 
 CF_PAIRS = 32
 """Pairs of terms of the incomplete-beta continued fraction (64 terms; converged to 1e-13

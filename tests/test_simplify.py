@@ -14,7 +14,7 @@ import math
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from brdffit.models._grey import Grey
+from brdffit.models._restrict import Restricted, make_neutral
 from scipy import stats
 
 from brdffit import ParameterError, Reduction, metrics, models, simplify, synthesize
@@ -131,23 +131,63 @@ def test_sign_count_is_the_binomial_tail():
 )
 def test_grey_spec_round_trip(spec, canonical):
     m = models.from_spec(spec)
-    assert isinstance(m, Grey) and models.label(m) == canonical
+    assert isinstance(m, Restricted) and models.label(m) == canonical
     assert models.from_spec(models.label(m)) == m
     assert models.label(m.name, m.options()) == canonical  # as a FitResult stores it
     assert models.split_specs(f"lambert,{canonical}") == ["lambert", canonical]
     # a grey variant is its base with equal channels, exactly
     params = {p.name: p.default_array() for p in m.parameters}
     wi, wo = random_pairs(0, 64)
-    base = {k: jnp.broadcast_to(v, (3,)) if k in m.names else v for k, v in params.items()}
+    base = {k: jnp.broadcast_to(v, (3,)) if k in m.grey else v for k, v in params.items()}
     assert np.array_equal(m.eval(params, wi, wo), m.base.eval(base, wi, wo))
 
 
 def test_grey_of_nothing_is_the_base_and_bad_names_are_typed_errors():
     assert models.get("walter", grey=()) == models.get("walter")
-    with pytest.raises(ParameterError, match="grey=alpha names no RGB parameter"):
+    with pytest.raises(ParameterError, match="grey=alpha names no free RGB parameter"):
         models.from_spec("walter[grey=alpha]")
     with pytest.raises(ParameterError, match="its RGB parameters: ks\\+f0"):
         models.from_spec("walter[diffuse=false,grey=kd]")
+    with pytest.raises(ParameterError, match="grey=f0 names no free RGB.*parameters: kd\\+ks$"):
+        models.from_spec("walter[neutral=f0,grey=f0]")  # pinned: no channels left to tie
+
+
+@pytest.mark.parametrize(
+    ("spec", "canonical", "pinned"),
+    [
+        ("disney[neutral=sheen_tint+specular]", "disney[neutral=specular+sheen_tint]",
+         {"specular": 0.5, "sheen_tint": 0.0}),
+        ("walter[neutral=f0,grey=kd]", "walter[grey=kd,neutral=f0]", {"f0": [0.04] * 3}),
+        ("std[fresnel=dielectric,neutral=gamma+eta]", "std[neutral=eta+gamma]",
+         {"eta": 1.5, "gamma": 2.0}),
+        ("filament[neutral=reflectance]", "filament[neutral=reflectance]", {"reflectance": 0.5}),
+    ],
+)  # fmt: skip
+def test_neutral_spec_round_trip_is_the_base_at_the_neutral_values(spec, canonical, pinned):
+    m = models.from_spec(spec)
+    assert isinstance(m, Restricted) and models.label(m) == canonical
+    assert models.from_spec(models.label(m)) == m
+    assert models.label(m.name, m.options()) == canonical
+    names = {p.name for p in m.parameters}
+    assert not names & set(pinned) and len(names) + len(pinned) == len(m.base.parameters)
+    # the published values: Disney's and Filament's 0.5 mean F0 = 0.04, ((1.5-1)/(1.5+1))^2
+    params = {p.name: p.default_array() for p in m.parameters}
+    wi, wo = random_pairs(1, 64)
+    base = {k: jnp.broadcast_to(v, (3,)) if k in m.grey else v for k, v in params.items()}
+    base |= {k: jnp.asarray(v, float) for k, v in pinned.items()}
+    assert np.array_equal(m.eval(params, wi, wo), m.base.eval(base, wi, wo))
+
+
+def test_neutral_names_a_parameter_with_a_neutral_value():
+    assert models.get("walter", neutral=()) == models.get("walter")
+    with pytest.raises(ParameterError, match="neutral=alpha names no parameter with a neutral "
+                       "value; those with one: f0"):  # fmt: skip
+        models.from_spec("walter[neutral=alpha]")
+    with pytest.raises(ParameterError, match="neutral=roughness.*specular\\+sheen_tint"):
+        models.from_spec("disney[neutral=roughness]")
+    # a grey parameter pinned stops being grey
+    m = make_neutral(models.from_spec("walter[grey=ks+f0]"), "f0")
+    assert models.label(m) == "walter[grey=ks,neutral=f0]"
 
 
 def test_bad_criterion_and_folds_are_typed_errors():

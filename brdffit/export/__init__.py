@@ -47,7 +47,7 @@ from brdffit.export._match import (
     match,
     relative_rms,
 )
-from brdffit.models._grey import Grey
+from brdffit.models._restrict import Restricted, base_of
 from brdffit.result import FitResult
 
 TARGETS: dict[str, types.ModuleType] = {"mitsuba": mitsuba, "gltf": gltf, "materialx": materialx}
@@ -119,7 +119,7 @@ def check_targets(model: object, targets: str | Iterable[str]) -> tuple[str, ...
     ``targets``.
     """
     names = parse_targets(targets)
-    base = _base(model)
+    base = base_of(model)
     for t in names:
         reason = getattr(TARGETS[t], "unsupported", lambda m: None)(base)
         if reason:
@@ -140,17 +140,13 @@ def default_prefix(input_path: str | Path, json_path: str | Path | None, label: 
     return Path(f"{Path(input_path).stem}.{safe}")
 
 
-def _base(model: object) -> object:
-    return model.base if isinstance(model, Grey) else model
-
-
 def _model_and_values(result: FitResult, wi: np.ndarray, wo: np.ndarray):
     model = models.get(result.model, **dict(result.options))
     params = {k: np.asarray(v, float) for k, v in result.params.items()}
     f = np.asarray(model.eval(params, wi, wo), float)
-    if isinstance(model, Grey):
+    if isinstance(model, Restricted):
         params = model.expand({k: jnp.asarray(v) for k, v in params.items()})
-    return _base(model), {k: np.array(v, float) for k, v in params.items()}, f
+    return base_of(model), {k: np.array(v, float) for k, v in params.items()}, f
 
 
 def export(result: FitResult, target: str) -> Export:
