@@ -1,7 +1,8 @@
 """Does :func:`brdffit.simplify` recover the feature set a material was made with? (issue 21)
 
 For each setting, synthetic data are drawn from a known variant (the *generating set*:
-which optional lobes are on, which RGB parameters are grey, how many lobes) with fresh
+which optional lobes are on, which RGB parameters are grey, how many lobes, which
+parameters sit at their neutral value, such as Disney's ``specular`` 0.5) with fresh
 noise per seed, and the search starts from a richer model. Per setting the script
 counts the seeds whose chosen variant is exactly the generating one (``recovered``),
 those that keep a feature the data were made without (``false keep``: a lobe, an
@@ -49,6 +50,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from brdffit.models._restrict import base_of, restrictions  # noqa: E402
+
 from brdffit import enable_compilation_cache, models, simplify, synthesize  # noqa: E402
 from brdffit.merl import merl_grid  # noqa: E402
 from brdffit.variants import features  # noqa: E402
@@ -59,9 +62,9 @@ _DISNEY_OFF = "subsurface=false,sheen=false,clearcoat=false,anisotropic=false,me
 _DISNEY_BASE = {"base_color": [0.5, 0.25, 0.1], "specular": 0.5, "roughness": 0.4}
 
 
-def _disney(on: dict) -> str:
+def _disney(on: dict, neutral: str = "specular") -> str:
     off = [w for w in _DISNEY_OFF.split(",") if w.split("=")[0] not in on]
-    return f"disney[{','.join(off)}]"
+    return f"disney[{','.join(off)}{',neutral=' + neutral if neutral else ''}]"
 
 
 @dataclass(frozen=True)
@@ -80,7 +83,9 @@ class Setting:
 
 SETTINGS = (
     Setting("disney_plain", _disney({}), _DISNEY_BASE, DISNEY_START, "azimuths",
-            "Burley diffuse + GGX, nothing optional"),
+            "Burley diffuse + GGX, nothing optional, specular 0.5 (F0 0.04, neutral)"),
+    Setting("disney_specular", _disney({}, neutral=""), {**_DISNEY_BASE, "specular": 0.8},
+            DISNEY_START, "azimuths", "as plain, specular 0.8 (F0 0.064): not neutral"),
     Setting("disney_clearcoat", _disney({"clearcoat": 1}),
             {**_DISNEY_BASE, "clearcoat": 0.5, "clearcoat_gloss": 0.7}, DISNEY_START, "azimuths",
             "clear coat 0.5, gloss 0.7 (GTR1 alpha 0.031)"),
@@ -89,10 +94,11 @@ SETTINGS = (
             "sheen 0.8, tint 0.5"),
     Setting("disney_aniso", _disney({"anisotropic": 1}), {**_DISNEY_BASE, "anisotropic": 0.7},
             DISNEY_START, "azimuths", "anisotropic 0.7 (alpha_x / alpha_y = 2.7)"),
-    Setting("disney_all3", _disney({"clearcoat": 1, "sheen": 1, "anisotropic": 1}),
+    Setting("disney_all3", _disney({"clearcoat": 1, "sheen": 1, "anisotropic": 1},
+                                   neutral="specular+sheen_tint"),
             {**_DISNEY_BASE, "clearcoat": 0.5, "clearcoat_gloss": 0.7, "sheen": 0.8,
-             "sheen_tint": 0.5, "anisotropic": 0.7}, DISNEY_START, "azimuths",
-            "clear coat, sheen and anisotropy as above"),
+             "sheen_tint": 0.0, "anisotropic": 0.7}, DISNEY_START, "azimuths",
+            "clear coat, sheen and anisotropy as above, an untinted sheen (tint 0, neutral)"),
     Setting("lafortune_1lobe", "lafortune",
             {"kd": [0.3, 0.15, 0.08], "rho_1": [0.6, 0.45, 0.3], "cxy_1": -1.0, "n_1": 60.0},
             "lafortune[n_lobes=2]", "merl", "one coloured lobe, n 60"),
@@ -105,9 +111,9 @@ SETTINGS = (
     Setting("walter_gold", "walter[diffuse=false,specular_weight=false]",
             {"f0": [1.0, 0.71, 0.29], "alpha": 0.15}, "walter", "merl",
             "gold-like F0 (1, .71, .29), alpha 0.15"),
-    Setting("walter_plastic", "walter[specular_weight=false,grey=f0]",
+    Setting("walter_plastic", "walter[specular_weight=false,neutral=f0]",
             {"kd": [0.6, 0.2, 0.1], "f0": 0.04, "alpha": 0.2}, "walter", "merl",
-            "red plastic: coloured kd, grey F0 0.04, alpha 0.2"),
+            "red plastic: coloured kd, F0 0.04 (neutral), alpha 0.2"),
 )  # fmt: skip
 
 MERL_STRIDE = (5, 9, 9)
@@ -130,8 +136,12 @@ def directions(grid: str) -> tuple[np.ndarray, np.ndarray] | None:
 
 
 def make_data(st: Setting, seed: int):
-    """Noisy synthetic measurements of ``st`` for ``seed``."""
-    truth = models.from_spec(st.truth)
+    """Noisy synthetic measurements of ``st`` for ``seed``: the truth's unrestricted model
+    at ``st.params``, which give the neutral parameters their neutral values."""
+    pinned = restrictions(models.from_spec(st.truth))[1]
+    truth = base_of(models.from_spec(st.truth))
+    for name in pinned:
+        assert st.params[name] == truth.parameter(name).neutral, (st.name, name)
     d = directions(st.grid)
     kw = dict(noise_mult=NOISE, seed=seed, source=f"{st.name} seed {seed}")
     if d is None:

@@ -9,8 +9,11 @@ fits every variant one move simpler, keeping the best if the criterion allows it
   specular weight, anisotropy; ...);
 * an integer lobe count ``n_...`` lowered by one (Lafortune's and Kurt's ``n_lobes``);
   every lobe is tried as the one dropped and the cheapest start is kept;
-* an RGB parameter made grey, one value for the three channels
-  (:mod:`brdffit.models._restrict`, the spec option ``grey=a+b``).
+* an RGB parameter made grey, one value for the three channels (the spec option
+  ``grey=a+b``);
+* a parameter pinned at its neutral value, where its table row has one (the spec option
+  ``neutral=a+b``: Disney's ``specular`` at 0.5, the common dielectric; a Schlick ``f0``
+  at 0.04; the Student-t ``gamma`` at 2, GGX; :mod:`brdffit.models._restrict`).
 
 Each variant starts from its parent's optimum (removed parameters dropped, a grey one
 the mean of its channels, a lobe count's later lobes renumbered, a new parameter the
@@ -120,11 +123,10 @@ from brdffit.errors import ParameterError
 from brdffit.fit import fit
 from brdffit.folds import MIN_GAIN, deal_blocks, feature_test, fold_t, keep_threshold
 from brdffit.measurements import Measurements
-from brdffit.models._restrict import Restricted, make_grey
 from brdffit.objective import Objective
 from brdffit.reduction import PathRow, Reduction
 from brdffit.result import FitResult
-from brdffit.variants import option_moves, renumber, rgb_names, scalar_count, start_rows
+from brdffit.variants import joint_move, moves
 
 __all__ = [
     "CRITERIA", "PathRow", "Reduction", "deal_blocks", "fold_t", "keep_threshold", "simplify"
@@ -298,7 +300,8 @@ class _Search:
         scored = [(c, ch, *self.accept(c, node, best)) for c, ch in tried]
         passed = sorted((t for t in scored if t[0].ok and t[2]), key=self._rank)
         if len(passed) > 1:
-            joint = self.joint(node, [t[1] for t in passed])
+            changes = [t[1] for t in passed]
+            joint = joint_move(node.model, node.rows, changes, self.frozen, self._start_cost)
             if joint is not None:
                 j = self.solve(joint[0], joint[1])
                 best = min(best, j, key=lambda c: c.value) if j.ok else best
@@ -318,25 +321,6 @@ class _Search:
         """BIC: the lowest; CV: the simplest accepted, then the lowest held-out loss."""
         return (t[0].value,) if self.criterion == "bic" else (t[0].n_free, t[0].value)
 
-    def joint(self, node: _Node, changes: list[str]) -> tuple[AbstractModel, dict, str] | None:
-        """The moves ``changes`` applied one after the other from ``node``: (model, start
-        rows, the changes joined by ``+``), or ``None`` when fewer than two apply. A
-        change follows its feature: once a lobe is dropped, ``grey rho_2`` of the parent
-        is ``grey rho_1`` of the child if lobe 1 went, and is skipped if lobe 2 went, as
-        is a change that no longer applies (``grey ks`` once the specular weight is gone)."""
-        model, rows, used, todo = node.model, node.rows, [], list(changes)
-        while todo:
-            change = todo.pop(0)
-            hit = next((m for m in self.moves_of(model, rows) if m[2] == change), None)
-            if hit is None:
-                continue
-            model, rows, drop = hit[0], hit[1], hit[3]
-            used.append(change)
-            if drop is not None:  # later grey changes name lobes by the parent's numbers
-                names = [(c, renumber(c.removeprefix("grey "), drop)) for c in todo]
-                todo = [f"grey {n}" if c.startswith("grey ") else c for c, n in names if n]
-        return (model, rows, " + ".join(used)) if len(used) > 1 else None
-
     def accept(self, child: _Node, parent: _Node, best: _Node) -> tuple[bool, float, float]:
         """(accepted, held-out ratio to ``best``, t of the per-fold log ratios; the two
         NaN for BIC): module docstring."""
@@ -346,41 +330,14 @@ class _Search:
         return not keep, ratio, t
 
     def moves(self, node: _Node):
-        """Every variant one move simpler than ``node``: (model, start rows, change text,
-        the parent's lobe dropped or ``None``)."""
-        return self.moves_of(node.model, node.rows)
+        """Every variant one move simpler than ``node`` (:func:`~brdffit.variants.moves`)."""
+        return moves(node.model, node.rows, self.frozen, self._start_cost)
 
-    def moves_of(self, model: AbstractModel, rows: dict[str, np.ndarray]):
-        """Every variant one move simpler than ``model`` fitted at ``rows`` (:meth:`moves`)."""
-        grey = model.grey if isinstance(model, Restricted) else ()
-        size = scalar_count(model)
-        for name, new, child_base in option_moves(model):
-            drops = range(1, new + 2) if not isinstance(new, bool) else (None,)
-            child, start, drop = self._child(child_base, grey, rows, drops)
-            if scalar_count(child) < size:
-                yield child, start, f"{name}={str(new).lower()}", drop
-        for p in model.parameters:
-            if p.shape == (3,) and p.name not in self.frozen:
-                child = make_grey(model, [p.name])
-                yield child, start_rows(child, rows, None), f"grey {p.name}", None
-
-    def _child(self, child_base, grey, rows, drops) -> tuple[AbstractModel, dict, int | None]:
-        """``child_base`` with the parent's ``grey`` names that it still has, its start
-        rows and the lobe dropped; with several lobes to drop (``drops``), the drop whose
-        all-data start costs least (a grey lobe's name moves with the lobe)."""
-        out = []
-        for d in drops:
-            names = [renumber(n, d) for n in grey]
-            child = make_grey(child_base, [n for n in names if n in rgb_names(child_base)])
-            out.append((child, start_rows(child, rows, d), d))
-        if len(out) == 1:
-            return out[0]
-        costs = []
-        for child, start, _ in out:
-            obj = Objective.build(child, self.m)
-            z = obj.layout.solver_vector({k: v[0] for k, v in start.items()})
-            costs.append(float(_cost(obj, jnp.asarray(z), self.prep)))
-        return out[int(np.argmin(np.where(np.isfinite(costs), costs, np.inf)))]
+    def _start_cost(self, model: AbstractModel, rows: dict[str, np.ndarray]) -> float:
+        """The all-data cost of ``model`` at its start ``rows`` (row 0)."""
+        obj = Objective.build(model, self.m)
+        z = obj.layout.solver_vector({k: v[0] for k, v in rows.items()})
+        return float(_cost(obj, jnp.asarray(z), self.prep))
 
 
 @eqx.filter_jit

@@ -83,7 +83,8 @@ def test_reduction_table_plot_and_json(grey_reduction):
     d = r.to_dict()
     assert d["chosen"] == r.chosen and d["start"] == "walter" and len(d["path"]) == len(r.path)
     assert '"chosen": "walter[diffuse=false,grey=ks+f0]"' in r.to_json()
-    assert d["removed"] == list(r.removed) and d["kept"] == ["specular_weight"]
+    assert d["removed"] == list(r.removed)
+    assert d["kept"] == ["specular_weight", "free f0"]  # made with f0 0.3, not 0.04
 
 
 def test_coloured_specular_keeps_its_colour():
@@ -217,6 +218,7 @@ def test_sweep_simplify_stores_the_reduction_resumes_and_tables_the_survivors(tm
         assert red["path"][0]["decision"] == "start" and red["removed"]
     plastic = json.loads(files[0].read_text())["simplify"]  # syn00-plastic: kd is coloured
     assert "RGB kd" in plastic["kept"] and "diffuse" in plastic["kept"]
+    assert "free f0" not in plastic["kept"]  # made with f0 0.04: held at its neutral value
     stamps = [p.stat().st_mtime_ns for p in files]
     again = run_sweep(out, synthetic_materials(2), ["walter"], ["low_e2"], stride=STRIDE,
                       screen=8, n_restarts=0, jobs=1, progress=False, simplify="cv")  # fmt: skip
