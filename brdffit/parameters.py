@@ -243,12 +243,14 @@ class ParameterLayout:
     def solver_vector(self, params: Mapping[str, object]) -> np.ndarray:
         """Natural dict -> flat solver-space vector of the free parameters, clipped into
         the box (numpy: starts are made on the host)."""
-        if not self.free:
-            return np.zeros(0)
-        lo, hi = self.bounds_flat()
-        x = np.concatenate([np.ravel(np.asarray(params[p.name], float)) for p in self.free])
-        x = np.clip(x, lo, hi)
+        x = np.clip(self.natural_vector(params), *self.bounds_flat())
         return np.where(self.solver_log_mask(), np.log(np.maximum(x, 1e-300)), x)
+
+    def natural_vector(self, params: Mapping[str, object]) -> np.ndarray:
+        """Natural dict -> flat natural vector of the free parameters, in the order of
+        :meth:`labels` (numpy, on the host; :meth:`join` is the traced one)."""
+        flat = [np.ravel(np.asarray(params[p.name], float)) for p in self.free]
+        return np.concatenate(flat) if flat else np.zeros(0)
 
     def solver_log_mask(self) -> np.ndarray:
         """Per free scalar: True where the solver works on ``ln x``."""

@@ -345,18 +345,12 @@ def unidentified(
     left to the at-bound flag.
     """
     lo, hi = layout.bounds_flat()
-    x = _free_values(layout, params)
+    x = layout.natural_vector(params)
     span = np.isfinite(lo) & np.isfinite(hi) & ~layout.solver_log_mask()
     with np.errstate(invalid="ignore"):
         width = np.where(span, hi - lo, np.abs(x))
         bad = np.isfinite(sd) & (sd > width)
     return [lab for lab, b in zip(layout.labels(), bad, strict=True) if b]
-
-
-def _free_values(layout: ParameterLayout, params: dict[str, np.ndarray]) -> np.ndarray:
-    """The free scalars of ``params`` (natural units) in the order of ``layout.labels()``."""
-    flat = [np.ravel(np.asarray(params[p.name], float)) for p in layout.free]
-    return np.concatenate(flat) if flat else np.zeros(0)
 
 
 def _at_bound(
@@ -365,7 +359,7 @@ def _at_bound(
     """Labels of the free scalars (``kd[b]``, ``alpha``) within :data:`AT_BOUND_RTOL` /
     :data:`AT_BOUND_ATOL` of a bound, or held on it by the active set."""
     lo, hi = layout.bounds_flat()
-    x = _free_values(layout, params)
+    x = layout.natural_vector(params)
     tol = dict(rtol=AT_BOUND_RTOL, atol=AT_BOUND_ATOL)
     near = np.asarray(binding, bool) | np.isclose(x, lo, **tol) | np.isclose(x, hi, **tol)
     return tuple(lab for lab, n in zip(layout.labels(), near, strict=True) if n)
