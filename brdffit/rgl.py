@@ -22,7 +22,7 @@ directions a user gives. The MERL grid has ``phi_h = 0``; an anisotropic file is
 that plane, or, with ``phi_h_deg``, in the grid rotated about the normal.
 
 Spectral files (a ``wavelengths`` field): the file's spectra are converted node by node
-to linear sRGB (:func:`brdffit.table.spectral_weights`) and written to a temporary RGB
+to linear sRGB (:func:`brdffit.spectra.spectral_weights`) and written to a temporary RGB
 file. That is exact: the plugin's interpolation is linear in the stored values and
 linear in wavelength between nodes, as the conversion assumes.
 
@@ -220,7 +220,7 @@ def _rgb_copy(header: RglFile, folder: Path) -> Path:
     """An RGB file with the spectral file's tables converted to linear sRGB, in ``folder``."""
     from mitsuba.python import tensor_io
 
-    from brdffit.table import spectral_weights
+    from brdffit.spectra import spectral_weights
 
     with contextlib.redirect_stdout(io.StringIO()):  # tensor_io prints a line per call
         t = tensor_io.read(header.path)

@@ -12,14 +12,9 @@ from hypothesis import strategies as st
 from brdffit.cli import main
 from brdffit.errors import MeasurementFileError, ParameterError
 from brdffit.loading import load_measurements
+from brdffit.spectra import XYZ_TO_SRGB, cie1931_xyz, spectrum_to_rgb, spectrum_to_xyz
 from brdffit.sweep import table_materials
-from brdffit.table import (
-    XYZ_TO_SRGB,
-    cie1931_xyz,
-    read_table,
-    spectrum_to_rgb,
-    spectrum_to_xyz,
-)
+from brdffit.table import read_table
 
 DIRS = "wi_x,wi_y,wi_z,wo_x,wo_y,wo_z"
 FILES = settings(
