@@ -17,6 +17,7 @@ samples below the horizon and those the file gives a negative value. Beyond the 
 largest incidence angle (its ``theta_i`` nodes, shown in ``source``) Mitsuba holds the
 last measured slice.
 
+The header is checked first, without Mitsuba (:func:`brdffit.tensor_file.rgl_header`).
 Grids: :func:`read_rgl` evaluates the (strided) MERL grid, :func:`read_rgl_at` the
 directions a user gives. The MERL grid has ``phi_h = 0``; an anisotropic file is seen in
 that plane, or, with ``phi_h_deg``, in the grid rotated about the normal.
@@ -44,11 +45,9 @@ from __future__ import annotations
 import contextlib
 import io
 import os
-import struct
 import subprocess
 import sys
 import tempfile
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -57,6 +56,7 @@ from jaxtyping import ArrayLike, Float
 from brdffit.errors import MeasurementFileError, MissingDependencyError, ParameterError
 from brdffit.measurements import Measurements
 from brdffit.merl import merl_grid, merl_grid_measurements
+from brdffit.tensor_file import RglFile, rgl_header
 
 GRAZING_DEG: float = 85.0
 """Default zenith cut (degrees) of :func:`read_rgl` and :func:`read_rgl_at`."""
@@ -66,9 +66,6 @@ VARIANTS: tuple[str, ...] = ("llvm_ad_rgb", "scalar_rgb")
 
 _SCALAR_CHUNK = 20_000  # directions per scalar worker, at least
 _LLVM_CHUNK = 1 << 20  # directions per vectorised eval call
-_REQUIRED = ("description", "theta_i", "phi_i", "ndf", "sigma", "vndf", "luminance", "jacobian")
-_DTYPES = {1: "u1", 2: "i1", 3: "u2", 4: "i2", 5: "u4", 6: "i4", 7: "u8", 8: "i8"}
-_DTYPES |= {9: "f2", 10: "f4", 11: "f8"}
 _BROKEN: dict[str, str] = {}  # variant -> why it failed in this process
 
 # The worker: its own process, so that a crash in Mitsuba's JIT cannot kill the caller.
@@ -107,103 +104,6 @@ else:
         out[s:e] = np.asarray(v).T
 np.save(out_path, out)
 """.replace("CHUNK", str(_LLVM_CHUNK))
-
-
-@dataclass(frozen=True)
-class RglFile:
-    """What the header of a ``.bsdf`` file says.
-
-    Fields: ``path``; ``description`` (the file's text); ``isotropic`` (at most two
-    ``phi_i`` nodes); ``spectral`` (a ``wavelengths`` field; else RGB); ``theta_i_deg``,
-    the incidence nodes in degrees; ``resolution``, the (n_phi, n_theta) size of each
-    half-vector table; ``fields``: name -> (dtype, shape, byte offset).
-    """
-
-    path: str
-    description: str
-    isotropic: bool
-    spectral: bool
-    theta_i_deg: tuple[float, ...]
-    resolution: tuple[int, int]
-    fields: dict
-
-
-def rgl_header(path: str | os.PathLike[str]) -> RglFile:
-    """Read and check the header of a ``.bsdf`` tensor file (no Mitsuba needed).
-
-    Format (Mitsuba's ``TensorFile``): ``"tensor_file\\0"``, version (1, 0) as two
-    bytes, a uint32 field count, then per field a uint16 name length, the name, a
-    uint16 rank, a uint8 dtype code, a uint64 byte offset and rank x uint64 sizes.
-
-    Raises :class:`MeasurementFileError` for a missing file, a file that is not a tensor
-    file, a truncated one, or a missing field of the ``measured`` format.
-    """
-    p = Path(path)
-    try:
-        size = p.stat().st_size
-        with open(p, "rb") as f:
-            magic = f.read(12)
-            if magic != b"tensor_file\0":
-                raise MeasurementFileError(
-                    p, "not a Mitsuba tensor file (no 'tensor_file' header); expected an "
-                    "RGL-EPFL .bsdf file",
-                )  # fmt: skip
-            version, (n_fields,) = f.read(2), struct.unpack("<I", _read(f, p, 4))
-            if version != b"\x01\x00":
-                raise MeasurementFileError(
-                    p, f"tensor file version {tuple(version)}; expected (1, 0)"
-                )
-            fields = {}
-            for _ in range(n_fields):
-                (n_name,) = struct.unpack("<H", _read(f, p, 2))
-                name = _read(f, p, n_name).decode("utf-8", "replace")
-                ndim, code, offset = struct.unpack("<HBQ", _read(f, p, 11))
-                shape = struct.unpack(f"<{ndim}Q", _read(f, p, 8 * ndim))
-                if code not in _DTYPES:
-                    raise MeasurementFileError(p, f"field {name!r} has unknown dtype code {code}")
-                dtype = np.dtype(_DTYPES[code])
-                if offset + dtype.itemsize * int(np.prod(shape)) > size:
-                    raise MeasurementFileError(p, f"truncated: field {name!r} runs past the end")
-                fields[name] = (dtype, tuple(int(s) for s in shape), int(offset))
-            description = _field(f, fields.get("description")).tobytes().decode("utf-8", "replace")
-            theta_i = _field(f, fields.get("theta_i"))
-    except FileNotFoundError:
-        raise MeasurementFileError(p, "no such file") from None
-    except IsADirectoryError:
-        raise MeasurementFileError(p, "is a directory; expected a .bsdf file") from None
-    except OSError as e:
-        raise MeasurementFileError(p, f"cannot be read: {e.strerror or e}") from None
-    spectral = "wavelengths" in fields
-    values = ("spectra", "wavelengths") if spectral else ("rgb",)
-    missing = [k for k in (*_REQUIRED, *values) if k not in fields]
-    if missing:
-        raise MeasurementFileError(
-            p, f"missing field {', '.join(missing)}: not a file of Mitsuba's 'measured' format"
-        )
-    return RglFile(
-        path=str(p),
-        description=description,
-        isotropic=fields["phi_i"][1][0] <= 2,
-        spectral=spectral,
-        theta_i_deg=tuple(float(t) for t in np.degrees(theta_i.astype(float))),
-        resolution=fields[values[0]][1][-2:],
-        fields=fields,
-    )
-
-
-def _read(f, p: Path, n: int) -> bytes:
-    b = f.read(n)
-    if len(b) != n:
-        raise MeasurementFileError(p, "truncated tensor-file header")
-    return b
-
-
-def _field(f, spec) -> np.ndarray:
-    if spec is None:
-        return np.zeros(0, np.uint8)
-    dtype, shape, offset = spec
-    f.seek(offset)
-    return np.fromfile(f, dtype=dtype, count=int(np.prod(shape))).reshape(shape)
 
 
 def _check_mitsuba() -> None:
