@@ -101,7 +101,7 @@ class Restricted(AbstractModel):
         out = {k: jnp.broadcast_to(v, (3,)) if k in self.grey else v for k, v in params.items()}
         for p in self.base.parameters:
             if p.name in self.neutral:
-                out[p.name] = jnp.full(p.shape, p.neutral)
+                out[p.name] = jnp.broadcast_to(p.neutral, p.shape)  # weak: takes its dtype
         return out
 
     def core(self, params: Params, g: ShadingGeometry) -> Float[Array, "n 3"]:
