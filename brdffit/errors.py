@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from contextlib import contextmanager
+
 
 class BrdffitError(Exception):
     """Base class of every error brdffit raises on purpose."""
@@ -14,6 +17,23 @@ class MeasurementFileError(BrdffitError, ValueError):
         self.path = str(path)
         self.problem = problem
         super().__init__(f"{self.path}: {problem}")
+
+
+@contextmanager
+def reading(path: object, expected: str) -> Iterator[None]:
+    """Inside the block, the operating system's refusals to read ``path`` become
+    :class:`MeasurementFileError`: no such file, a directory (``expected`` says what was
+    wanted: ``"a MERL .binary file"``), permission denied, any other ``OSError``."""
+    try:
+        yield
+    except FileNotFoundError:
+        raise MeasurementFileError(path, "no such file") from None
+    except IsADirectoryError:
+        raise MeasurementFileError(path, f"is a directory; expected {expected}") from None
+    except PermissionError:
+        raise MeasurementFileError(path, "permission denied; cannot read the file") from None
+    except OSError as e:
+        raise MeasurementFileError(path, f"cannot be read: {e.strerror or e}") from None
 
 
 class ParameterError(BrdffitError, ValueError):

@@ -30,7 +30,7 @@ import numpy as np
 from jaxtyping import ArrayLike, Bool, Float, Int
 
 from brdffit.atomic import write_atomic
-from brdffit.errors import MeasurementFileError, MeasurementsError, ParameterError
+from brdffit.errors import MeasurementFileError, MeasurementsError, ParameterError, reading
 from brdffit.geometry import (
     MERL_SHAPE,
     above_horizon,
@@ -321,31 +321,22 @@ def read_merl(path: str | os.PathLike[str]) -> Measurements:
 
 def _read_body(p: Path) -> np.ndarray:
     """The file's 3 x 1,458,000 raw float64 (native byte order) after the size/header checks."""
-    try:
-        with open(p, "rb") as f:
-            size = os.fstat(f.fileno()).st_size
-            header = f.read(12)
-            if len(header) < 12:
-                raise MeasurementFileError(
-                    p,
-                    f"truncated: {size} bytes, too short for the 12-byte header; "
-                    f"a MERL file has {MERL_FILE_BYTES:,} bytes",
-                )
-            _check_header(p, header)
-            if size != MERL_FILE_BYTES:
-                kind = "truncated" if size < MERL_FILE_BYTES else "too long"
-                raise MeasurementFileError(
-                    p, f"{kind}: {size:,} bytes; expected {MERL_FILE_BYTES:,} for a 90x90x180 table"
-                )
-            raw = np.fromfile(f, dtype=_BODY_DTYPE, count=3 * MERL_N_CELLS)
-    except FileNotFoundError:
-        raise MeasurementFileError(p, "no such file") from None
-    except IsADirectoryError:
-        raise MeasurementFileError(p, "is a directory; expected a MERL .binary file") from None
-    except PermissionError:
-        raise MeasurementFileError(p, "permission denied; cannot read the file") from None
-    except OSError as e:
-        raise MeasurementFileError(p, f"cannot be read: {e.strerror or e}") from None
+    with reading(p, "a MERL .binary file"), open(p, "rb") as f:
+        size = os.fstat(f.fileno()).st_size
+        header = f.read(12)
+        if len(header) < 12:
+            raise MeasurementFileError(
+                p,
+                f"truncated: {size} bytes, too short for the 12-byte header; "
+                f"a MERL file has {MERL_FILE_BYTES:,} bytes",
+            )
+        _check_header(p, header)
+        if size != MERL_FILE_BYTES:
+            kind = "truncated" if size < MERL_FILE_BYTES else "too long"
+            raise MeasurementFileError(
+                p, f"{kind}: {size:,} bytes; expected {MERL_FILE_BYTES:,} for a 90x90x180 table"
+            )
+        raw = np.fromfile(f, dtype=_BODY_DTYPE, count=3 * MERL_N_CELLS)
     if raw.size != 3 * MERL_N_CELLS:  # the file shrank while being read
         raise MeasurementFileError(
             p, f"truncated: read {raw.size} of {3 * MERL_N_CELLS} float64 values"

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from brdffit.errors import MeasurementFileError
+from brdffit.errors import MeasurementFileError, reading
 
 _REQUIRED = ("description", "theta_i", "phi_i", "ndf", "sigma", "vndf", "luminance", "jacobian")
 _DTYPES = {1: "u1", 2: "i1", 3: "u2", 4: "i2", 5: "u4", 6: "i4", 7: "u8", 8: "i8"}
@@ -52,7 +52,7 @@ def rgl_header(path: str | os.PathLike[str]) -> RglFile:
     file, a truncated one, or a missing field of the ``measured`` format.
     """
     p = Path(path)
-    try:
+    with reading(p, "a .bsdf file"):
         size = p.stat().st_size
         with open(p, "rb") as f:
             magic = f.read(12)
@@ -80,12 +80,6 @@ def rgl_header(path: str | os.PathLike[str]) -> RglFile:
                 fields[name] = (dtype, tuple(int(s) for s in shape), int(offset))
             description = _field(f, fields.get("description")).tobytes().decode("utf-8", "replace")
             theta_i = _field(f, fields.get("theta_i"))
-    except FileNotFoundError:
-        raise MeasurementFileError(p, "no such file") from None
-    except IsADirectoryError:
-        raise MeasurementFileError(p, "is a directory; expected a .bsdf file") from None
-    except OSError as e:
-        raise MeasurementFileError(p, f"cannot be read: {e.strerror or e}") from None
     spectral = "wavelengths" in fields
     values = ("spectra", "wavelengths") if spectral else ("rgb",)
     missing = [k for k in (*_REQUIRED, *values) if k not in fields]
