@@ -23,9 +23,11 @@ import sys
 import time
 from pathlib import Path
 
-import stress  # benchmarks/stress: the script's folder is on sys.path
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the root: the truths in tests.cases
 
-from brdffit.atomic import write_text
+import stress  # noqa: E402  (benchmarks/stress: the script's folder is on sys.path)
+
+from brdffit.atomic import write_text  # noqa: E402
 
 
 def _names(ap: argparse.ArgumentParser, text: str, known: list[str], what: str) -> list[str]:

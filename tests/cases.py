@@ -62,3 +62,12 @@ CASES: list[Case] = [
 
 for _path in sorted(Path(__file__).parent.glob("cases_*.py")):
     CASES += importlib.import_module(f"tests.{_path.stem}").ROWS
+
+
+def params_of(model: str, **options: object) -> dict:
+    """The parameter values of the first row of :data:`CASES` for ``model`` built with
+    exactly ``options`` (the benchmarks' truths reuse the rows the tests check)."""
+    for case in CASES:
+        if case.model == model and case.options == options:
+            return dict(case.params)
+    raise KeyError(f"no case row {model} {options}")

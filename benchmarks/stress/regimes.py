@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+from tests.cases import params_of
+
 N_STARTS = 20
 N_SAMPLES = 2000
 REL_TOL = 1e-6
@@ -205,18 +207,7 @@ ROLES: dict[str, Roles] = {
         "m_1",
         "width",
         "kd",
-        two_lobes=(
-            {"n_lobes": 2},
-            {
-                "ks_1": [0.2, 0.1, 0.1],
-                "f0_1": 0.5,
-                "m_1": 0.4,
-                "alpha_1": 0.8,
-                "ks_2": [0.3, 0.4, 0.5],
-                "m_2": 0.05,
-                "alpha_2": 0.2,
-            },
-        ),
+        two_lobes=({"n_lobes": 2}, params_of("kurt", n_lobes=2)),
     ),
     "lafortune": Roles(
         {"kd": [0.1, 0.2, 0.3], "rho_1": [0.5, 0.4, 0.3], "cxy_1": -1.2, "n_1": 30.0},
@@ -224,17 +215,7 @@ ROLES: dict[str, Roles] = {
         "exponent",
         "kd",
         narrow={"cxy_1": -1.0},
-        two_lobes=(
-            {"n_lobes": 2},
-            {
-                "rho_1": [0.3, 0.2, 0.1],
-                "cxy_1": -1.3,
-                "n_1": 5.0,
-                "rho_2": [0.2, 0.3, 0.4],
-                "cxy_2": -1.0,
-                "n_2": 300.0,
-            },
-        ),
+        two_lobes=({"n_lobes": 2}, params_of("lafortune", n_lobes=2)),
     ),
     "lambert": Roles({"kd": [0.2, 0.5, 0.8]}, diffuse="kd"),
     "low": Roles(
