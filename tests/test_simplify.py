@@ -1,5 +1,5 @@
 """Model reduction (brdffit.simplify): synthetic data made without a feature lose it, data
-made with it keep it; the grey variant's spec round trip; typed errors.
+made with it keep it; the grey and neutral variants' spec round trips; typed errors.
 
 Small strided MERL sub-grids (stride 5, 5, 9: 6,480 cells, about 3,000 inside the 80-degree
 cut) and 5% multiplicative noise keep each search to a few seconds once compiled; both
