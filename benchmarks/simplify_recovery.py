@@ -6,7 +6,8 @@ parameters sit at their neutral value, such as Disney's ``specular`` 0.5) with f
 noise per seed, and the search starts from a richer model. Per setting the script
 counts the seeds whose chosen variant is exactly the generating one (``recovered``),
 those that keep a feature the data were made without (``false keep``: a lobe, an
-option or a colour the truth lacks) and those that drop one the data have
+option, a colour the truth lacks, or a parameter left free that the truth has at its
+neutral value) and those that drop one the data have
 (``missed``), each with a Clopper-Pearson 95% interval. Targets: recovered >= 95%,
 false keep <= 5%.
 

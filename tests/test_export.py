@@ -78,6 +78,7 @@ EXACT = [
     ("lambert", {"kd": KD}, {"mitsuba", "gltf", "materialx"}),
     ("walter[diffuse=false,specular_weight=false]", {"f0": F0, "alpha": 0.2}, {"mitsuba"}),
     ("walter[grey=ks]", {"kd": KD, "ks": 0.5, "f0": F0, "alpha": 0.2}, {"mitsuba"}),
+    ("walter[grey=ks,neutral=f0]", {"kd": KD, "ks": 0.5, "alpha": 0.2}, {"mitsuba"}),
     (
         "walter[anisotropic=true,diffuse=false,specular_weight=false]",
         {"f0": F0, "alpha_x": 0.3, "alpha_y": 0.08},
