@@ -17,46 +17,84 @@ import numpy as np
 from brdffit.errors import MeasurementsError
 from brdffit.geometry import above_horizon, fold_phi_d, io_to_halfdiff
 
+NEGATIVE_POLICIES = ("not_measured", "signed")
+"""How a source's negative channel values are read (a reader states its policy):
+
+- ``"not_measured"``: a negative number marks that channel of that sample as not measured
+  (MERL binaries, RGB tables); the other channels of the sample stay in the fit.
+- ``"signed"``: negative numbers are measured values and are fitted as they are (RGB
+  converted from spectra and interpolated, as in RGL-EPFL ``.bsdf`` files and spectral
+  tables, holds small genuine negatives). Log metrics need ``1 + f cos > 0``; see
+  :func:`brdffit.metrics.prepare` for the rare channel outside that domain.
+"""
+
 
 @dataclass(frozen=True)
 class MaskCounts:
-    """Why samples of a :class:`Measurements` are invalid; each counted once, under the
-    first of these reasons that applies:
+    """Why samples and channels of a :class:`Measurements` are left out of a fit.
+
+    A sample is counted once, under the first reason that applies:
 
     - ``below_horizon``: ``wi.z <= 0`` or ``wo.z <= 0`` (for a MERL table, at the bin
       centre: about 24% of the cells by geometry alone);
-    - ``not_measured``: every channel negative (MERL's "not measured" mark; a non-finite
-      value is stored as -1, so an all-NaN sample counts here);
-    - ``negative_channel``: some channels negative, others not (bad data in one channel,
-      e.g. a measurement's blue channel);
-    - ``other``: masked by the reader or the caller for another reason (an extra mask).
+    - ``outside_cut``: beyond the reader's zenith cut (``Measurements.zenith_cut_deg``),
+      where the source was not evaluated (not a missing measurement);
+    - ``no_channel``: every channel masked (e.g. MERL's "not measured" mark on all three);
+    - ``other``: masked by the reader or the caller although a channel is valid.
 
-    ``n`` is the number of samples, valid or not.
+    Inside the cut and above the horizon, a sample can still have some channels masked:
+    ``channel_negative[c]`` counts channel ``c`` masked holding a negative number (read
+    as "not measured" under that source's policy), ``channel_other[c]`` masked for another
+    reason. Those of the ``no_channel`` samples are included. ``n`` is the number of
+    samples, valid or not.
     """
 
     n: int
     below_horizon: int
-    not_measured: int
-    negative_channel: int
+    outside_cut: int
+    no_channel: int
     other: int
+    channel_negative: tuple[int, int, int] = (0, 0, 0)
+    channel_other: tuple[int, int, int] = (0, 0, 0)
+    zenith_cut_deg: float | None = None
 
     @property
     def n_masked(self) -> int:
-        """Number of invalid samples."""
-        return self.below_horizon + self.not_measured + self.negative_channel + self.other
+        """Number of samples with no channel in the fit."""
+        return self.below_horizon + self.outside_cut + self.no_channel + self.other
+
+    @property
+    def channels_masked(self) -> tuple[int, int, int]:
+        """Per RGB channel, the samples above the horizon and inside the cut that lose
+        that channel (any reason)."""
+        return tuple(a + b for a, b in zip(self.channel_negative, self.channel_other, strict=True))
 
     def text(self) -> str:
-        """One line: ``349,920 of 1,458,000 samples: 349,920 below the horizon, ...``."""
+        """One line: ``349,920 of 1,458,000 samples: 349,920 below the horizon, ...``,
+        then the channels masked inside the cut per channel and reason."""
+        cut = f"{self.zenith_cut_deg:g} deg " if self.zenith_cut_deg is not None else ""
         reasons = [
             (self.below_horizon, "below the horizon"),
-            (self.not_measured, "not measured (every channel negative)"),
-            (self.negative_channel, "with a negative channel (the others not)"),
+            (self.outside_cut, f"outside the {cut}zenith cut (not evaluated)"),
+            (self.no_channel, "with no channel measured"),
             (self.other, "masked by the reader for another reason"),
         ]
         parts = [f"{k:,} {why}" for k, why in reasons if k]
-        if not parts:
-            return f"none of {self.n:,} samples"
-        return f"{self.n_masked:,} of {self.n:,} samples: {', '.join(parts)}"
+        line = (
+            f"{self.n_masked:,} of {self.n:,} samples: {', '.join(parts)}"
+            if parts
+            else f"none of {self.n:,} samples"
+        )
+        if any(self.channels_masked):
+            per = []
+            for name, neg, oth in zip(
+                "RGB", self.channel_negative, self.channel_other, strict=True
+            ):
+                why = [f"{neg:,} negative (not measured)"] if neg else []
+                why += [f"{oth:,} other"] if oth else []
+                per.append(f"{name} {' + '.join(why) if why else 0}")
+            line += "; channels masked inside the cut: " + ", ".join(per)
+        return line
 
 
 def readonly(a: np.ndarray) -> np.ndarray:
@@ -74,15 +112,24 @@ class Measurements:
     - ``wi``, ``wo``: (N, 3) unit directions, light and viewer.
     - ``theta_h``, ``theta_d``, ``phi_d``: (N,) Rusinkiewicz angles (radians),
       ``phi_d`` folded into [0, pi).
-    - ``values``: (N, 3) linear RGB BRDF in 1/sr, without the cosine.
+    - ``values``: (N, 3) linear RGB BRDF in 1/sr, without the cosine; signed where the
+      source's negatives are measured values (:data:`NEGATIVE_POLICIES`).
     - ``weights``: (N,) solid-angle measure of each sample, sr^2.
-    - ``valid``: (N,) True where the sample was measured and both directions lie
-      above the horizon. Invalid samples are kept (file order) but never fitted.
+    - ``valid``: (N,) True where the sample has at least one measured channel and both
+      directions lie above the horizon. Invalid samples are kept (file order) but never
+      fitted.
     - ``source``: where the samples came from (a path or a description).
     - ``channel_scales``: (3,) RGB scales applied to the raw numbers (MERL: 1/1500,
       1.15/1500, 1.66/1500; 1 for data already in 1/sr).
     - ``grid``: the MERL table shape when the samples are a full MERL table in file
       order, else ``None``.
+    - ``channel_valid``: (N, 3) True where that channel of that sample is fitted; a
+      channel is never valid in an invalid sample. ``None`` (the default) means every
+      channel of a valid sample.
+    - ``zenith_cut_deg``: the reader's zenith cut in degrees (samples beyond it were not
+      evaluated: "outside the cut", not "not measured"), or ``None``.
+    - ``stride``: the MERL sub-grid stride when the samples are a strided MERL grid in
+      order (:func:`brdffit.merl.merl_grid`), else ``None``.
     """
 
     wi: np.ndarray
@@ -96,9 +143,16 @@ class Measurements:
     source: str = "unknown"
     channel_scales: np.ndarray = field(default_factory=lambda: np.ones(3))
     grid: tuple[int, int, int] | None = None
+    channel_valid: np.ndarray | None = None
+    zenith_cut_deg: float | None = None
+    stride: tuple[int, int, int] | None = None
 
     def __post_init__(self) -> None:
         n = np.shape(self.wi)[0] if np.ndim(self.wi) == 2 else -1
+        if self.channel_valid is None:
+            object.__setattr__(
+                self, "channel_valid", np.repeat(np.asarray(self.valid)[:, None], 3, axis=1)
+            )
         expected = {
             "wi": (n, 3),
             "wo": (n, 3),
@@ -109,6 +163,7 @@ class Measurements:
             "weights": (n,),
             "valid": (n,),
             "channel_scales": (3,),
+            "channel_valid": (n, 3),
         }
         for name, shape in expected.items():
             arr = np.asarray(getattr(self, name))
@@ -117,8 +172,13 @@ class Measurements:
                     f"Measurements.{name} has shape {arr.shape}; expected {shape} "
                     f"(N = {n} samples from wi)"
                 )
-            dtype = bool if name == "valid" else np.float64
+            dtype = bool if name in ("valid", "channel_valid") else np.float64
             object.__setattr__(self, name, readonly(arr.astype(dtype, copy=False)))
+        channels = self.channel_valid & self.valid[:, None]
+        valid = self.valid & channels.any(axis=1)
+        if not (np.array_equal(channels, self.channel_valid) and np.array_equal(valid, self.valid)):
+            object.__setattr__(self, "channel_valid", readonly(channels))
+            object.__setattr__(self, "valid", readonly(valid))
         if self.grid is not None and int(np.prod(self.grid)) != n:
             raise MeasurementsError(f"Measurements.grid {self.grid} does not hold N = {n} samples")
 
@@ -131,16 +191,24 @@ class Measurements:
         *,
         weights: np.ndarray | None = None,
         valid: np.ndarray | None = None,
+        negative: str = "not_measured",
         source: str = "unknown",
         channel_scales: np.ndarray | None = None,
         grid: tuple[int, int, int] | None = None,
+        zenith_cut_deg: float | None = None,
     ) -> Measurements:
-        """Build from directions and values; angles are derived, invalid cells marked.
+        """Build from directions and values; angles are derived, invalid channels marked.
 
         ``weights`` defaults to equal weights summing to ``(2 pi)^2`` (samples spread
-        uniformly over both hemispheres). Samples with a non-finite or negative value
-        (any channel) or a direction below the horizon are marked invalid in addition
-        to ``valid``.
+        uniformly over both hemispheres). A sample with a direction below the horizon, or
+        ``valid`` False, is invalid. ``negative`` (:data:`NEGATIVE_POLICIES`) says what a
+        negative channel means: ``"not_measured"`` masks that channel alone, ``"signed"``
+        keeps it as a measured value. ``valid`` may be (N,) or (N, 3) (per channel).
+
+        Raises :class:`MeasurementsError` on shapes that do not match, an unknown
+        ``negative`` policy, or a non-finite value in a sample that ``valid`` does not
+        already mark invalid (mark it invalid, or store a negative number under
+        ``"not_measured"``, to say "not measured").
         """
         wi = np.asarray(wi, float)
         wo = np.asarray(wo, float)
@@ -149,15 +217,31 @@ class Measurements:
             raise MeasurementsError(f"wi and wo must both be (N, 3); got {wi.shape} and {wo.shape}")
         if values.shape != wi.shape:
             raise MeasurementsError(f"values must be (N, 3) = {wi.shape}; got {values.shape}")
+        if negative not in NEGATIVE_POLICIES:
+            raise MeasurementsError(
+                f"negative={negative!r}; accepted: {', '.join(map(repr, NEGATIVE_POLICIES))}"
+            )
         n = wi.shape[0]
         theta_h, theta_d, phi_d, _ = io_to_halfdiff(wi, wo)
-        ok = above_horizon(wi, wo) & np.all(np.isfinite(values), axis=-1)
-        ok &= np.all(values >= 0.0, axis=-1)
+        channels = np.ones((n, 3), bool)
         if valid is not None:
-            ok &= np.asarray(valid, bool)
+            v = np.asarray(valid, bool)
+            channels &= v if v.ndim == 2 else v[:, None]
+        above = above_horizon(wi, wo)
+        finite = np.isfinite(values)
+        bad = ~finite & channels & above[:, None]
+        if bad.any():
+            row = int(np.flatnonzero(bad.any(axis=1))[0])
+            raise MeasurementsError(
+                f"{source}: {int(bad.sum()):,} non-finite values (NaN or inf) in samples not "
+                f"marked invalid, the first in sample {row} ({values[row].tolist()}); mark "
+                "them invalid with valid=, or store a negative number for not measured"
+            )
+        if negative == "not_measured":
+            channels &= values >= 0.0
         if weights is None:
             weights = np.full(n, (2 * np.pi) ** 2 / max(n, 1))
-        clean = np.where(np.isfinite(values), values, -1.0)
+        clean = np.where(finite, values, -1.0)
         return cls(
             wi=wi,
             wo=wo,
@@ -166,10 +250,12 @@ class Measurements:
             phi_d=fold_phi_d(phi_d),
             values=clean,
             weights=np.asarray(weights, float),
-            valid=ok,
+            valid=above & channels.any(axis=1),
             source=source,
             channel_scales=np.ones(3) if channel_scales is None else channel_scales,
             grid=grid,
+            channel_valid=channels,
+            zenith_cut_deg=zenith_cut_deg,
         )
 
     @property
@@ -183,32 +269,68 @@ class Measurements:
         return int(np.count_nonzero(self.valid))
 
     def replace(self, **changes: object) -> Measurements:
-        """A copy with some fields changed (the original is untouched)."""
+        """A copy with some fields changed (the original is untouched).
+
+        A new ``valid`` without a new ``channel_valid`` applies to every channel alike.
+        """
+        if "valid" in changes and "channel_valid" not in changes:
+            changes["channel_valid"] = None
         return dataclasses.replace(self, **changes)
 
+    def outside_cut(self) -> np.ndarray:
+        """(N,) True where a direction lies beyond :attr:`zenith_cut_deg` (above the horizon)."""
+        if self.zenith_cut_deg is None:
+            return np.zeros(self.n, bool)
+        c = np.cos(np.radians(self.zenith_cut_deg))
+        return above_horizon(self.wi, self.wo) & ((self.wi[:, 2] < c) | (self.wo[:, 2] < c))
+
     def mask_counts(self) -> MaskCounts:
-        """Why the invalid samples are masked (:class:`MaskCounts`), from the fields alone."""
+        """Why samples and channels are masked (:class:`MaskCounts`), from the fields alone."""
         below = ~above_horizon(self.wi, self.wo)
-        negative = self.values < 0.0  # non-finite values are stored as -1
-        every = negative.all(axis=1) & ~below
-        some = negative.any(axis=1) & ~every & ~below
+        outside = self.outside_cut() & ~below
+        inside = ~below & ~outside
+        none = inside & ~self.channel_valid.any(axis=1)
         masked = ~self.valid
-        counts = [int(np.count_nonzero(masked & m)) for m in (below, every, some)]
-        return MaskCounts(self.n, *counts, int(np.count_nonzero(masked)) - sum(counts))
+        counts = [int(np.count_nonzero(masked & m)) for m in (below, outside, none)]
+        lost = inside[:, None] & ~self.channel_valid
+        negative = lost & (self.values < 0.0)
+        return MaskCounts(
+            self.n,
+            *counts,
+            int(np.count_nonzero(masked)) - sum(counts),
+            channel_negative=tuple(int(k) for k in negative.sum(axis=0)),
+            channel_other=tuple(int(k) for k in (lost & ~negative).sum(axis=0)),
+            zenith_cut_deg=self.zenith_cut_deg,
+        )
+
+    def layout(self) -> str:
+        """How the samples are laid out: the full MERL table, a strided MERL grid, or
+        scattered directions."""
+        if self.grid is not None:
+            return f"full MERL table {self.grid[0]} x {self.grid[1]} x {self.grid[2]}"
+        if self.stride is not None:
+            s = self.stride
+            return f"MERL grid at stride {s[0]} {s[1]} {s[2]}"
+        return "scattered directions"
 
     def summary(self) -> str:
         """A few lines for ``brdffit info``: size, validity and why samples are masked,
         value range, provenance."""
-        v = self.values[self.valid]
+        v = self.values
         lines = [
             f"source          {self.source}",
             f"samples         {self.n} ({self.n_valid} valid, {self.n - self.n_valid} masked)",
             f"masked          {self.mask_counts().text()}",
-            f"grid            {self.grid if self.grid else 'scattered directions'}",
+            f"layout          {self.layout()}",
             f"channel scales  {', '.join(f'{s:.6g}' for s in self.channel_scales)}",
         ]
-        if v.size:
-            for c, name in enumerate("RGB"):
-                lo, med, hi = np.percentile(v[:, c], [0, 50, 100])
-                lines.append(f"{name} (1/sr)        min {lo:.4g}  median {med:.4g}  max {hi:.4g}")
+        for c, name in enumerate("RGB"):
+            x = v[self.channel_valid[:, c], c]
+            if x.size:
+                lo, med, hi = np.percentile(x, [0, 50, 100])
+                neg = int(np.count_nonzero(x < 0))
+                tail = f"  ({neg:,} negative values kept)" if neg else ""
+                lines.append(
+                    f"{name} (1/sr)        min {lo:.4g}  median {med:.4g}  max {hi:.4g}{tail}"
+                )
         return "\n".join(lines)

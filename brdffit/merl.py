@@ -5,7 +5,8 @@ little-endian int32 ``(90, 90, 180)`` = (n_theta_h, n_theta_d, n_phi_d), then
 3 x 1,458,000 little-endian float64, channel-planar (all R, then G, then B), each channel
 in ``[theta_h, theta_d, phi_d]`` C order. Physical value (1/sr, no cosine) = raw x scale,
 scales R 1/1500, G 1.15/1500, B 1.66/1500. Negative numbers mean "not measured": they
-are kept as they are (never clamped to 0) and their cells are marked invalid.
+are kept as they are (never clamped to 0) and that channel of that cell is masked; the
+cell's other channels stay in the fit (``Measurements.channel_valid``).
 
 Grid convention: every cell is represented by its bin centre (see
 :func:`brdffit.geometry.merl_bin_centres`) with ``phi_h = 0``; its weight is the solid
@@ -38,7 +39,7 @@ from brdffit.geometry import (
     merl_indices,
     merl_solid_angle_weights,
 )
-from brdffit.measurements import Measurements, readonly
+from brdffit.measurements import NEGATIVE_POLICIES, Measurements, readonly
 
 MERL_SCALES: np.ndarray = np.array([1.0 / 1500.0, 1.15 / 1500.0, 1.66 / 1500.0])
 """RGB scales of the MERL format: physical value (1/sr) = raw x scale."""
@@ -183,12 +184,15 @@ def merl_grid_measurements(
     stride: tuple[int, ...] | int = (1, 1, 1),
     channel_scales: ArrayLike | None = None,
     valid: Bool[ArrayLike, "a b c"] | None = None,
+    negative: str = "not_measured",
+    zenith_cut_deg: float | None = None,
 ) -> Measurements:
     """Measurements on the (strided) MERL grid from a channel-first value cube.
 
-    A sample is valid where both directions are above the horizon, every channel is
-    finite and non-negative, and ``valid`` (if given) is True. Non-finite values are
-    stored as -1 (like :meth:`Measurements.from_directions`); negatives are kept.
+    A channel of a sample is fitted where both directions are above the horizon, the
+    value is finite, ``valid`` (if given) is True and, under ``negative="not_measured"``,
+    the value is not negative. Non-finite values are stored as -1 and masked; negatives
+    are kept as they are.
 
     Arguments:
     - ``values``: (3, *grid shape) RGB BRDF values in 1/sr (no cosine), in
@@ -198,6 +202,8 @@ def merl_grid_measurements(
       result only for the full grid.
     - ``channel_scales``: scales the numbers were multiplied by (default 1, 1, 1).
     - ``valid``: optional extra mask of the grid shape.
+    - ``negative``: what a negative channel means (:data:`~brdffit.measurements.NEGATIVE_POLICIES`).
+    - ``zenith_cut_deg``: the source's zenith cut, recorded for :meth:`Measurements.mask_counts`.
 
     Returns: :class:`Measurements` in file order.
     """
@@ -208,26 +214,29 @@ def merl_grid_measurements(
             f"values has shape {cube.shape}; expected (3, {g.shape[0]}, {g.shape[1]}, "
             f"{g.shape[2]}) for stride {g.stride}"
         )
-    planes = cube.reshape(3, g.n)
-    finite = np.isfinite(planes).all(axis=0)
-    ok = g.above & finite & (planes >= 0.0).all(axis=0)
+    if negative not in NEGATIVE_POLICIES:
+        raise MeasurementsError(
+            f"negative={negative!r}; accepted: {', '.join(map(repr, NEGATIVE_POLICIES))}"
+        )
+    vals = np.array(cube.reshape(3, g.n).T, order="C")
+    channels = np.isfinite(vals) & g.above[:, None]
+    if negative == "not_measured":
+        channels &= vals >= 0.0
     if valid is not None:
-        ok &= np.asarray(valid, dtype=bool).reshape(g.n)
-    vals = np.empty((g.n, 3))
-    for c in range(3):
-        vals[:, c] = planes[c]
-    if not finite.all():
-        vals[~np.isfinite(vals)] = -1.0
-    return _grid_measurements(g, vals, ok, source, channel_scales)
+        channels &= np.asarray(valid, dtype=bool).reshape(g.n)[:, None]
+    vals[~np.isfinite(vals)] = -1.0
+    return _grid_measurements(g, vals, channels, source, channel_scales, zenith_cut_deg)
 
 
 def _grid_measurements(
     g: MerlGrid,
     values: np.ndarray,
-    valid: np.ndarray,
+    channel_valid: np.ndarray,
     source: str,
     channel_scales: ArrayLike | None,
+    zenith_cut_deg: float | None = None,
 ) -> Measurements:
+    """:class:`Measurements` on grid ``g``; ``channel_valid`` (N, 3) the fitted channels."""
     scales = np.ones(3) if channel_scales is None else np.asarray(channel_scales, float)
     return Measurements(
         wi=g.wi,
@@ -237,10 +246,13 @@ def _grid_measurements(
         phi_d=g.phi_d,
         values=values,
         weights=g.weights,
-        valid=valid,
+        valid=channel_valid.any(axis=1),
         source=source,
         channel_scales=scales,
         grid=MERL_SHAPE if g.stride == (1, 1, 1) else None,
+        channel_valid=channel_valid,
+        zenith_cut_deg=zenith_cut_deg,
+        stride=g.stride,
     )
 
 
@@ -259,7 +271,12 @@ def merl_subgrid(data: Measurements, stride: tuple[int, ...] | int) -> Measureme
     _require_full_table(data, "merl_subgrid")
     g = merl_grid(stride)
     return _grid_measurements(
-        g, data.values[g.index], data.valid[g.index], data.source, data.channel_scales
+        g,
+        data.values[g.index],
+        data.channel_valid[g.index],
+        data.source,
+        data.channel_scales,
+        data.zenith_cut_deg,
     )
 
 
@@ -278,12 +295,13 @@ def _require_full_table(data: Measurements, what: str) -> None:
 def read_merl(path: str | os.PathLike[str]) -> Measurements:
     """Read a MERL binary BRDF file into :class:`Measurements` (every cell, file order).
 
-    Values are raw x :data:`MERL_SCALES` in 1/sr (no cosine). A cell is valid when no
-    channel is negative ("not measured"; kept, never clamped) and both bin-centre
-    directions are above the horizon. ``weights`` are the cells' solid angles (sr^2),
-    ``grid`` is ``MERL_SHAPE``, ``channel_scales`` the MERL scales. How many cells are
-    masked and why (below the horizon, every channel negative, one channel negative):
-    :meth:`Measurements.mask_counts`, printed by ``brdffit info``.
+    Values are raw x :data:`MERL_SCALES` in 1/sr (no cosine). A channel of a cell is
+    fitted when it is not negative (MERL's "not measured": kept, never clamped, and
+    masked for that channel alone) and both bin-centre directions are above the horizon;
+    a cell is valid while one channel is. ``weights`` are the cells' solid angles (sr^2),
+    ``grid`` is ``MERL_SHAPE``, ``channel_scales`` the MERL scales. How many cells and
+    channels are masked and why: :meth:`Measurements.mask_counts`, printed by
+    ``brdffit info``.
 
     Arguments:
     - ``path``: the ``.binary`` file.
@@ -309,14 +327,14 @@ def read_merl(path: str | os.PathLike[str]) -> Measurements:
     values = np.empty((MERL_N_CELLS, 3))
     for c in range(3):
         np.multiply(planes[c], MERL_SCALES[c], out=values[:, c])
-    valid = g.above & ~((planes[0] < 0) | (planes[1] < 0) | (planes[2] < 0))
-    if not valid.any():
+    channels = (planes >= 0).T & g.above[:, None]
+    if not channels.any():
         raise MeasurementFileError(
             p,
             "no valid cell: every cell above the horizon is negative (not measured); "
             "expected at least one measured cell",
         )
-    return _grid_measurements(g, values, valid, str(p), MERL_SCALES)
+    return _grid_measurements(g, values, channels, str(p), MERL_SCALES)
 
 
 def _read_body(p: Path) -> np.ndarray:
@@ -365,12 +383,13 @@ def write_merl(path: str | os.PathLike[str], data: Measurements) -> None:
     """Write a full MERL table to a MERL binary file, atomically.
 
     Raw = value / :data:`MERL_SCALES` (the standard scales, whatever
-    ``data.channel_scales`` says: the values are in 1/sr); invalid cells are written
-    as -1 ("not measured"). The file is written to a temporary file in the same folder,
-    fsynced and moved into place with ``os.replace``: readers see the old file or the
-    new one, never a partial one. ``read_merl(write_merl(x))`` gives back every value
-    bit for bit when it came from a MERL file, and within 1 ulp otherwise (``v / s * s``
-    cannot always be exact).
+    ``data.channel_scales`` says: the values are in 1/sr); masked channels
+    (``data.channel_valid``) are written as -1 ("not measured"), and so are the
+    negative values of a signed source, which the format cannot hold. The file is
+    written to a temporary file in the same folder, fsynced and moved into place with
+    ``os.replace``: readers see the old file or the new one, never a partial one.
+    ``read_merl(write_merl(x))`` gives back every value bit for bit when it came from a
+    MERL file, and within 1 ulp otherwise (``v / s * s`` cannot always be exact).
 
     Arguments:
     - ``path``: the file to write (replaced if it exists).
@@ -380,13 +399,13 @@ def write_merl(path: str | os.PathLike[str], data: Measurements) -> None:
     not finite, :class:`MeasurementFileError` if the file cannot be written.
     """
     _require_full_table(data, "write_merl")
-    bad = data.valid & ~np.isfinite(data.values).all(axis=1)
+    bad = (data.channel_valid & ~np.isfinite(data.values)).any(axis=1)
     if bad.any():
         raise MeasurementsError(
             f"{int(bad.sum())} valid cells of {data.source!r} hold NaN/Inf; a MERL file "
             "accepts finite values (mark them invalid to write them as not measured)"
         )
-    raw = _to_raw(data.values, data.valid)
+    raw = _to_raw(data.values, data.channel_valid & (data.values >= 0.0))
     header = np.asarray(MERL_SHAPE, dtype=_HEADER_DTYPE).tobytes()
     try:
         write_atomic(path, [header, raw.astype(_BODY_DTYPE, copy=False)])
@@ -395,7 +414,8 @@ def write_merl(path: str | os.PathLike[str], data: Measurements) -> None:
 
 
 def _to_raw(values: np.ndarray, valid: np.ndarray) -> np.ndarray:
-    """(3, N) raw numbers such that raw * scale == value wherever such a float exists."""
+    """(3, N) raw numbers such that raw * scale == value wherever such a float exists;
+    -1 where ``valid`` ((N, 3)) is False."""
     raw = np.empty((3, values.shape[0]))
     for c in range(3):
         v, s = values[:, c], MERL_SCALES[c]
@@ -409,7 +429,7 @@ def _to_raw(values: np.ndarray, valid: np.ndarray) -> np.ndarray:
             idx = np.flatnonzero(miss)[hit]
             r[idx] = step[hit]
             miss[idx] = False
-        raw[c] = np.where(valid, r, -1.0)
+        raw[c] = np.where(valid[:, c], r, -1.0)
     return raw
 
 

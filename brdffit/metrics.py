@@ -12,7 +12,10 @@ low_e2   sum (ln(1 + fm ci) - ln(1 + fd ci))^2 sin(th_i)  sin(theta_i)          
 log1p_l1 mean |ln(1 + fm ci) - ln(1 + fd ci)|             uniform               Sztrajman 2021
 ======== ================================================ ===================== ==========
 
-Sums and means run over valid samples and the three RGB channels. Ngan et al. cut
+Sums and means run over the valid channels of the valid samples
+(``Measurements.channel_valid``): a channel a source did not measure has weight 0 and
+the normalisations count only the channels fitted, so a table with every channel
+valid gives the same numbers as before per-channel masks. Ngan et al. cut
 both angles at 80 degrees; here the cut (``cut_deg``, default 80) applies to every
 metric and is chosen once, when the data are prepared.
 
@@ -55,14 +58,18 @@ class Metric:
     l1: bool
     source: str
 
-    def sample_weights(self, data: Measurements, keep: np.ndarray) -> np.ndarray:
-        """Per-sample weights of the samples ``keep`` (indices), normalised as the loss needs."""
+    def channel_weights(self, data: Measurements, keep: np.ndarray, use: np.ndarray) -> np.ndarray:
+        """(len(keep), 3) weights of the samples ``keep`` (indices), 0 where ``use`` (the
+        same shape) is False, normalised as the loss needs: ``solid_angle`` to a sum of 3
+        (1 per channel, as a mean over channels of normalised sums), ``uniform`` to a sum
+        of 1 (a mean over the channels fitted), ``sin_theta_i`` unnormalised."""
+        use = np.asarray(use, float)
         if self.weighting == "solid_angle":
-            w = data.weights[keep]
-            return w / np.sum(w)
+            w = data.weights[keep][:, None] * use
+            return 3.0 * w / max(np.sum(w), np.finfo(float).tiny)
         if self.weighting == "sin_theta_i":
-            return np.sqrt(np.clip(1.0 - data.wi[keep, 2] ** 2, 0.0, None))
-        return np.full(len(keep), 1.0 / (3 * max(len(keep), 1)))
+            return np.sqrt(np.clip(1.0 - data.wi[keep, 2] ** 2, 0.0, None))[:, None] * use
+        return use / max(np.sum(use), 1.0)
 
     def loss_from_sum(self, total: Array) -> Array:
         """The reported loss from the weighted sum of squared (or absolute) differences."""
@@ -91,14 +98,15 @@ class Prepared(eqx.Module):
     """Data-only quantities of one data set for one metric, computed once.
 
     Fields: ``g`` shading geometry of the kept samples; ``cos_i`` (N,); ``target``
-    (N, 3) the data side ``T(f_data cos_i)``; ``weight`` (N,) the per-sample weight
-    of the metric; ``values`` (N, 3) the data in 1/sr.
+    (N, 3) the data side ``T(f_data cos_i)``; ``weight`` (N, 3) the metric's weight per
+    sample and channel, 0 for a channel left out; ``values`` (N, 3) the data in 1/sr
+    (0 where left out).
     """
 
     g: ShadingGeometry
     cos_i: Float[Array, " n"]
     target: Float[Array, "n 3"]
-    weight: Float[Array, " n"]
+    weight: Float[Array, "n 3"]
     values: Float[Array, "n 3"]
 
     @property
@@ -108,7 +116,8 @@ class Prepared(eqx.Module):
 
 
 def keep_mask(data: Measurements, cut_deg: float | None) -> np.ndarray:
-    """Valid samples with both zenith angles below ``cut_deg`` (None: no cut)."""
+    """Valid samples (at least one channel) with both zenith angles below ``cut_deg``
+    (None: no cut)."""
     keep = data.valid.copy()
     if cut_deg is not None:
         c = np.cos(np.deg2rad(cut_deg))
@@ -123,54 +132,73 @@ def prepare(
     cut_deg: float | None = 80.0,
     keep: np.ndarray | None = None,
 ) -> Prepared:
-    """Select the samples a metric sees and precompute everything that depends on data only.
+    """Select the samples and channels a metric sees and precompute everything that
+    depends on data only.
 
-    ``keep`` overrides the selection (a boolean mask or indices into ``data``).
+    A sample is kept when it is valid and inside the cut; a channel of it is fitted when
+    ``data.channel_valid`` says so and, for a log metric, when ``1 + f cos`` exceeds
+    :data:`LOG_FLOOR` + 1 (a signed source's rare large negative value lies outside
+    ``ln(1 + x)``'s domain: it is left out, never clamped and fitted).
+    ``keep`` overrides the sample selection (a boolean mask or indices into ``data``).
     Raises :class:`ParameterError` if no sample is left.
     """
-    if keep is None:
-        keep = keep_mask(data, cut_deg)
-    keep = np.asarray(keep)
-    if keep.dtype == bool:
-        keep = np.flatnonzero(keep)
-    if keep.size == 0:
-        raise ParameterError(
-            f"{data.source}: no valid sample left for the fit (cut at {cut_deg} degrees)"
-        )
+    keep = _keep_indices(data, cut_deg, keep)
     g = shading_geometry(jnp.asarray(data.wi[keep]), jnp.asarray(data.wo[keep]))
-    values = jnp.asarray(data.values[keep])
-    return Prepared(
-        g=g,
-        cos_i=g.cos_i,
-        target=transform_side(metric, values, g.cos_i),
-        weight=jnp.asarray(metric.sample_weights(data, keep)),
-        values=values,
-    )
+    return _prepared(data, metric, keep, g)
 
 
 def prepare_all(
     data: Measurements, *, cut_deg: float | None = 80.0, keep: np.ndarray | None = None
 ) -> dict[str, Prepared]:
     """:func:`prepare` for every metric, sharing one geometry; name -> Prepared."""
-    first, *rest = METRICS.values()
-    p0 = prepare(data, first, cut_deg=cut_deg, keep=keep)
-    keep = np.flatnonzero(keep_mask(data, cut_deg)) if keep is None else keep
-    out = {first.name: p0}
-    for m in rest:
-        out[m.name] = Prepared(
-            g=p0.g,
-            cos_i=p0.cos_i,
-            target=transform_side(m, p0.values, p0.cos_i),
-            weight=jnp.asarray(m.sample_weights(data, np.asarray(keep))),
-            values=p0.values,
+    keep = _keep_indices(data, cut_deg, keep)
+    g = shading_geometry(jnp.asarray(data.wi[keep]), jnp.asarray(data.wo[keep]))
+    return {m.name: _prepared(data, m, keep, g) for m in METRICS.values()}
+
+
+LOG_FLOOR = -0.999
+"""Smallest ``f cos`` a log metric fits (``ln(1 + x)`` is -6.9 there; -inf at -1)."""
+
+
+def channels_used(metric: Metric, values: np.ndarray, cos_i: np.ndarray, valid: np.ndarray):
+    """(N, 3) the channels a metric fits: ``valid``, and inside ``ln(1 + x)``'s domain
+    (``f cos > LOG_FLOOR``) for a log metric."""
+    if not metric.log1p:
+        return valid
+    return valid & (values * cos_i[:, None] > LOG_FLOOR)
+
+
+def _keep_indices(data: Measurements, cut_deg: float | None, keep) -> np.ndarray:
+    """Indices of the samples kept (``keep`` overrides the mask of :func:`keep_mask`)."""
+    keep = np.asarray(keep_mask(data, cut_deg) if keep is None else keep)
+    if keep.dtype == bool:
+        keep = np.flatnonzero(keep)
+    if keep.size == 0:
+        raise ParameterError(
+            f"{data.source}: no valid sample left for the fit (cut at {cut_deg} degrees)"
         )
-    return out
+    return keep
+
+
+def _prepared(data: Measurements, metric: Metric, keep: np.ndarray, g: ShadingGeometry):
+    """:class:`Prepared` of ``metric`` on the samples ``keep`` with geometry ``g``."""
+    cos_i = np.asarray(g.cos_i)
+    use = channels_used(metric, data.values[keep], cos_i, data.channel_valid[keep])
+    values = jnp.asarray(np.where(use, data.values[keep], 0.0))
+    return Prepared(
+        g=g,
+        cos_i=g.cos_i,
+        target=transform_side(metric, values, g.cos_i),
+        weight=jnp.asarray(metric.channel_weights(data, keep, use)),
+        values=values,
+    )
 
 
 def transform_side(metric: Metric, f: Array, cos_i: Array) -> Array:
-    """``f cos_i`` or ``ln(1 + f cos_i)`` (argument floored at -0.999 for noisy data)."""
+    """``f cos_i`` or ``ln(1 + f cos_i)`` (argument floored at :data:`LOG_FLOOR`; the
+    data's channels below it are left out by :func:`prepare`)."""
     x = f * cos_i[:, None]
-    return jnp.log1p(jnp.maximum(x, -0.999)) if metric.log1p else x
+    return jnp.log1p(jnp.maximum(x, LOG_FLOOR)) if metric.log1p else x
 
 
 def differences(metric: Metric, f_model: Array, prep: Prepared) -> Array:
@@ -181,7 +209,7 @@ def differences(metric: Metric, f_model: Array, prep: Prepared) -> Array:
 def residuals(metric: Metric, f_model: Array, prep: Prepared) -> Array:
     """The flat residual vector LM minimises (``0.5 sum r^2``), length 3N."""
     e = differences(metric, f_model, prep)
-    root_w = jnp.sqrt(prep.weight)[:, None]
+    root_w = jnp.sqrt(prep.weight)
     if metric.l1:
         # pseudo-Huber written as e * sqrt(2 / (sqrt(1 + x^2) + 1)): smooth at e = 0.
         x = e / L1_DELTA
@@ -250,6 +278,6 @@ def objective(
 def loss(metric: Metric, f_model: Array, prep: Prepared) -> Array:
     """The exact scalar loss of the metric (see the module table)."""
     e = differences(metric, f_model, prep)
-    w = prep.weight[:, None]
+    w = prep.weight
     total = jnp.sum(w * jnp.abs(e)) if metric.l1 else jnp.sum(w * e * e)
     return metric.loss_from_sum(total)

@@ -12,10 +12,19 @@ does not vanish exactly at the horizon, so ``eval / cos`` amplifies the interpol
 error by ``1 / cos(theta_o)`` (11.5x at 85 degrees, unbounded at 90). Samples whose
 ``wi`` or ``wo`` lies more than ``grazing_deg`` from the normal (default
 :data:`GRAZING_DEG`) are therefore not evaluated: they are kept, marked invalid, stored
-as -1 ("not measured", as in MERL files) and counted in ``Measurements.source``, with the
-samples below the horizon and those the file gives a negative value. Beyond the file's
-largest incidence angle (its ``theta_i`` nodes, shown in ``source``) Mitsuba holds the
-last measured slice.
+as -1 and counted as "outside the cut" (``Measurements.zenith_cut_deg``,
+:meth:`~brdffit.measurements.Measurements.mask_counts`), not as "not measured". Beyond
+the file's largest incidence angle (its ``theta_i`` nodes, shown in ``source``) Mitsuba
+holds the last measured slice.
+
+Negative values are measured values (``negative="signed"``): the files hold RGB
+converted from spectra and interpolated by the plugin, and both leave small genuine
+negative channels (vch_golden_yellow in plane at theta_i = theta_o = 20 degrees is
+(8.82, 4.49, -0.355) 1/sr, a saturated yellow whose blue falls outside the sRGB gamut).
+Masking such a cell, as MERL's convention would, dropped 16-20% of the cells inside
+the cut on leaf_maple and cc_ibiza_sunset, whole back-scatter regions and specular
+peaks, and biased the fitted colour. They are kept and fitted as they are; a log metric
+leaves out the rare channel with ``1 + f cos <= 0`` (:func:`brdffit.metrics.prepare`).
 
 The header is checked first, without Mitsuba (:func:`brdffit.tensor_file.rgl_header`).
 Grids: :func:`read_rgl` evaluates the (strided) MERL grid, :func:`read_rgl_at` the
@@ -243,7 +252,7 @@ def _note(header: RglFile, n: int, above, inside, grazing_deg: float) -> str:
         f"RGL {kind} '{header.description}'",
         f"theta_i nodes {t[0]:.3g}-{t[-1]:.3g} deg" if t else "no theta_i nodes",
         f"{int(above.sum() - inside.sum()):,} of {n:,} samples beyond the {grazing_deg:g} deg "
-        "zenith cut, stored as not measured (-1)",
+        "zenith cut, not evaluated",
     ]
     return f"{header.path} ({'; '.join(parts)})"
 
@@ -258,9 +267,9 @@ def read_rgl(
 ) -> Measurements:
     """An RGL ``.bsdf`` file evaluated on the (strided) MERL grid, as :class:`Measurements`.
 
-    Values are ``eval / cos(theta_o)`` in 1/sr (no cosine), linear RGB; weights the MERL
-    cells' solid angles (sr^2). Cells below the horizon or beyond the zenith cut, and
-    cells with a negative channel, are marked invalid and counted in ``source``.
+    Values are ``eval / cos(theta_o)`` in 1/sr (no cosine), linear RGB, signed (module
+    docstring); weights the MERL cells' solid angles (sr^2). Cells below the horizon or
+    beyond the zenith cut are marked invalid and counted (``brdffit info``).
 
     Arguments:
     - ``path``: the ``.bsdf`` file (RGB or spectral, isotropic or anisotropic).
@@ -290,6 +299,8 @@ def read_rgl(
         source=_note(header, g.n, above, inside, grazing_deg),
         stride=stride,
         valid=inside.reshape(g.shape),
+        negative="signed",
+        zenith_cut_deg=grazing_deg,
     )
     return data.replace(wi=wi, wo=wo) if phi_h_deg else data
 
@@ -322,5 +333,7 @@ def read_rgl_at(
         values,
         weights=weights,
         valid=inside,
+        negative="signed",
         source=_note(header, wi.shape[0], above, inside, grazing_deg),
+        zenith_cut_deg=grazing_deg,
     )

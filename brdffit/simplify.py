@@ -353,14 +353,14 @@ def _solve_rows(obj: Objective, z0, prep: metrics.Prepared, train, lo, hi, tol):
 
     def one(args):
         z, mask = args
-        p = dataclasses.replace(prep, weight=prep.weight * mask)
+        p = dataclasses.replace(prep, weight=prep.weight * mask[:, None])
         lin = starts.linear_start(obj, z, p)
         z = jnp.where(obj.cost(lin, p) < obj.cost(z, p), lin, z)
         d = lm.solve(obj, z, p, lo, hi, tol)
         f = obj.model.evaluate(obj.params(d.z), prep.g)
         e = metrics.differences(m, f, prep)
         e = jnp.abs(e) if m.l1 else e * e
-        held = jnp.sum((prep.weight * (1.0 - mask))[:, None] * e)
+        held = jnp.sum(prep.weight * (1.0 - mask)[:, None] * e)
         r = metrics.residuals(m, f, prep)
         return d.z, d.reason, held, jnp.sum(r * r), metrics.loss(m, f, prep)
 

@@ -67,8 +67,7 @@ def linear_start(obj: Objective, z: jax.Array, prep: Prepared) -> jax.Array:
     if not names:
         return z
     f0, basis = linear_split(obj.model, obj.params(z), prep.g, names)
-    w = jnp.sqrt(prep.weight) * prep.cos_i
-    w = w[:, None] * jnp.ones((1, 3), w.dtype)
+    w = jnp.sqrt(prep.weight) * prep.cos_i[:, None]
     if obj.metric.log1p:
         w = w / (1.0 + jnp.maximum(prep.values * prep.cos_i[:, None], 0.0))
     a = (basis * w[:, :, None]).reshape(-1, basis.shape[-1])

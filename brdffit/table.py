@@ -28,10 +28,14 @@ An ``.npz`` archive may instead hold ``wi`` and ``wo`` as (N, 3) arrays, ``rgb``
 (N, 3), or ``spectra`` (N, L) with ``wavelengths`` (L,) in nm. CSV lines starting with
 ``#`` are comments; the first other line is the header.
 
-Samples with a direction below the horizon (``z <= 0``) or a negative channel (a bad
-measurement, or a spectrum outside the sRGB gamut) are kept and marked invalid;
-``brdffit info`` counts them by reason (:meth:`Measurements.mask_counts`), and
-``Measurements.source`` says how many spectra fell outside the gamut. Any other problem
+Samples with a direction below the horizon (``z <= 0``) are kept and marked invalid.
+Negative values, per source (``Measurements`` ``negative`` policy): in an RGB table a
+negative channel marks that channel of that sample "not measured" (masked alone, the
+other channels stay in the fit); in a spectral table the RGB values are computed and a
+negative channel is a measured colour outside the sRGB gamut, kept and fitted signed.
+``brdffit info`` counts masked samples and channels by reason
+(:meth:`Measurements.mask_counts`), and ``Measurements.source`` says how many spectra
+fell outside the gamut. Any other problem
 (no such file, no rows, a missing, unknown or duplicated column, both conventions at
 once, a non-finite number, a direction that is not a unit vector, a negative weight,
 no valid sample) raises :class:`~brdffit.errors.MeasurementFileError` naming the file
@@ -215,19 +219,27 @@ def table_measurements(columns: dict[str, ArrayLike], *, source: str) -> Measure
         )
     above = above_horizon(wi, wo)
     negative = above & np.any(rgb < 0, axis=1)
+    policy = "signed" if how.startswith("spectral") else "not_measured"
     n = wi.shape[0]
-    if not np.any(above & ~negative):
+    usable = above & (np.any(rgb >= 0, axis=1) if policy == "not_measured" else True)
+    if not np.any(usable):
         raise MeasurementFileError(
             source,
             f"no valid sample: {n - int(above.sum())} of {n} below the horizon, "
-            f"{int(negative.sum())} with a negative channel",
+            f"{int((above & np.all(rgb < 0, axis=1)).sum())} with every channel negative "
+            "(not measured)",
         )
     notes = [f"{n} samples, {how}"]
     notes.append("weights from the weight column" if weights is not None else "uniform weights")
     if how.startswith("spectral") and negative.any():
         notes.append(f"{int(negative.sum())} spectra outside the sRGB gamut (a channel < 0)")
     return Measurements.from_directions(
-        wi, wo, rgb, weights=weights, source=f"{source} (table: {'; '.join(notes)})"
+        wi,
+        wo,
+        rgb,
+        weights=weights,
+        negative=policy,
+        source=f"{source} (table: {'; '.join(notes)})",
     )
 
 

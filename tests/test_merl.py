@@ -75,16 +75,37 @@ def test_read_values_mask_and_geometry(table, merl_file):
     assert table.n == N and table.grid == MERL_SHAPE and table.source == str(merl_file)
     np.testing.assert_array_equal(table.values, (raw * MERL_SCALES[:, None]).T)
     np.testing.assert_array_equal(table.channel_scales, MERL_SCALES)
-    np.testing.assert_array_equal(table.valid, g.above & (raw >= 0).all(axis=0))
+    # per channel: a negative number masks that channel of that cell alone
+    np.testing.assert_array_equal(table.channel_valid, g.above[:, None] & (raw >= 0).T)
+    np.testing.assert_array_equal(table.valid, g.above & (raw >= 0).any(axis=0))
     np.testing.assert_array_equal(table.weights, g.weights)
     np.testing.assert_array_equal(table.theta_h, g.theta_h)
 
 
 def test_negative_cells_masked_not_clamped(table):
-    neg = (_raw() < 0).any(axis=0)
-    assert not table.valid[neg].any()
-    assert (table.values[neg].min(axis=1) < 0).all()  # kept as stored, never set to 0
-    np.testing.assert_array_equal(table.values[neg & (_raw()[0] == -1)][:, 0], -MERL_SCALES[0])
+    every = (_raw() < 0).all(axis=0)
+    assert not table.valid[every].any()
+    assert (table.values[every].max(axis=1) < 0).all()  # kept as stored, never set to 0
+    np.testing.assert_array_equal(table.values[every][:, 0], -MERL_SCALES[0])
+
+
+def test_one_negative_channel_masks_that_channel_only(table):
+    """MERL's "not measured" mark in one channel leaves the other two in the fit (a
+    per-cell mask threw the red and blue of these cells away)."""
+    g = merl_grid()
+    one = g.above & (_raw()[1] == -0.5) & (_raw()[0] >= 0)
+    assert one.sum() > 100
+    assert table.valid[one].all()
+    np.testing.assert_array_equal(table.channel_valid[one], [[True, False, True]] * one.sum())
+    counts = table.mask_counts()
+    assert counts.channel_negative[1] == int((g.above & (_raw()[1] < 0)).sum())
+    assert (
+        counts.channel_negative[0]
+        == counts.channel_negative[2]
+        == int((g.above & (_raw()[0] < 0)).sum())
+    )
+    assert counts.no_channel == int((g.above & (_raw() < 0).all(axis=0)).sum())
+    assert "channels masked inside the cut: R " in counts.text()
 
 
 @pytest.mark.parametrize("stride", [(1, 1, 1), (3, 3, 3), (5, 5, 5), (9, 9, 9), (3, 5, 9)])
@@ -146,8 +167,9 @@ def test_grid_measurements_marks_non_finite_invalid():
     cube[1, 5, 5, 5] = np.nan
     data = merl_grid_measurements(cube, source="x", stride=(9, 9, 9))
     flat = np.ravel_multi_index((5, 5, 5), g.shape)
-    assert not data.valid[flat] and data.values[flat, 1] == -1.0
-    assert data.n_valid == g.above.sum() - g.above[flat]
+    assert not data.channel_valid[flat, 1] and data.values[flat, 1] == -1.0
+    assert data.channel_valid[flat, [0, 2]].all() == bool(g.above[flat])
+    assert data.n_valid == g.above.sum()
     with pytest.raises(MeasurementsError, match="expected"):
         merl_grid_measurements(np.ones((3, 9, 9, 9)), source="x", stride=(9, 9, 9))
 
@@ -160,11 +182,11 @@ def test_write_read_round_trip_is_exact(table, tmp_path):
     write_merl(out, table)
     back = read_merl(out)
     assert out.stat().st_size == MERL_FILE_BYTES
-    np.testing.assert_array_equal(back.valid, table.valid)
-    v = table.valid
+    np.testing.assert_array_equal(back.channel_valid, table.channel_valid)
+    v = table.channel_valid
     np.testing.assert_array_equal(back.values[v], table.values[v])  # bit for bit
     raw = np.fromfile(out, dtype="<f8", offset=12).reshape(3, N)
-    assert (raw[:, ~v] == -1.0).all()  # invalid cells written as "not measured"
+    assert (raw.T[~v] == -1.0).all()  # masked channels written as "not measured"
     assert not list(tmp_path.glob(".*.tmp"))
 
 

@@ -66,7 +66,7 @@ def test_l1_surrogate_is_quadratic_near_zero_and_linear_far():
     data, _ = _data(2, 50)
     m = metrics.get_metric("log1p_l1")
     prep = metrics.prepare(data, m, cut_deg=None)
-    w = float(prep.weight[0])
+    w = float(prep.weight[0, 0])
     for e, expect in [(1e-6, 1e-12), (1.0, 2 * metrics.L1_DELTA * 1.0)]:
         # f such that log1p(f cos) - target = e exactly for every sample and channel.
         f = (jnp.expm1(prep.target + e)) / prep.cos_i[:, None]

@@ -17,7 +17,8 @@ import json
 import numpy as np
 import pytest
 
-from brdffit import rgl
+import brdffit
+from brdffit import models, rgl
 from brdffit.cli import main
 from brdffit.errors import MeasurementFileError, MissingDependencyError, ParameterError
 from brdffit.geometry import MERL_SHAPE
@@ -209,3 +210,31 @@ def test_full_grid_converts_to_a_merl_binary(files, tmp_path):
     back = read_merl(tmp_path / "lambert.binary")
     np.testing.assert_array_equal(back.valid, data.valid)
     np.testing.assert_allclose(back.values[back.valid], data.values[data.valid], rtol=1e-15)
+
+
+def test_negative_channels_are_measured_values_kept_and_fitted(tmp_path):
+    """RGB converted from spectra holds genuine negative channels: a cell with one is
+    kept whole (a per-cell mask dropped every cell of this file), counted as outside the
+    cut only beyond 85 degrees, and the other channels' colour is fitted."""
+    albedo = (0.5, 0.3, -0.02)
+    path = fx.lambert_file(tmp_path / "out_of_gamut.bsdf", albedo)
+    stride = (9, 9, 9)
+    data = read_rgl(path, stride=stride)
+    g = merl_grid(stride)
+    cut = np.cos(np.radians(rgl.GRAZING_DEG))
+    inside = g.above & (g.wi[:, 2] >= cut) & (g.wo[:, 2] >= cut)
+    np.testing.assert_array_equal(data.valid, inside)
+    assert data.channel_valid[inside].all()
+    blue = data.values[inside, 2]
+    assert (blue < 0).all()
+    # the interpolation bound holds for f cos; f = (f cos) / wo.z with wo.z >= cos 85 deg
+    bound = fx.lambert_error_bound(33) * abs(albedo[2]) / np.pi / cut
+    np.testing.assert_allclose(blue, albedo[2] / np.pi, rtol=F32, atol=bound)
+    counts = data.mask_counts()
+    assert counts.outside_cut == int((g.above & ~inside).sum()) and counts.no_channel == 0
+    assert counts.channels_masked == (0, 0, 0)
+    assert "outside the 85 deg zenith cut" in counts.text()
+    for metric in ("low_e2", "ngan"):
+        kd = np.asarray(brdffit.fit(models.get("lambert"), data, metric=metric).params["kd"])
+        np.testing.assert_allclose(kd[:2], albedo[:2], rtol=0.01)  # as the grey file above
+        assert kd[2] == 0.0  # at its bound: the nearest a non-negative albedo can come

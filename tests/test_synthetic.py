@@ -35,7 +35,8 @@ def test_additive_noise_negative_values_are_masked():
     m = models.get("lambert")
     d = synthesize(m, {"kd": 0.01}, grid="random", n=5000, noise_add=0.01, seed=0)
     assert 0 < d.n_valid < d.n  # some went negative and are therefore "not measured"
-    assert np.all(d.values[d.valid] >= 0)
+    assert np.all(d.values[d.channel_valid] >= 0)  # masked per channel
+    assert (d.valid & ~d.channel_valid.all(axis=1)).any()  # the other channels stay
 
 
 def test_bad_arguments_name_the_problem():

@@ -67,8 +67,10 @@ def test_directions_and_values_round_trip(tmp_path, seed, n, weighted, fmt):
     np.testing.assert_allclose(data.wi, wi, rtol=0, atol=1e-15)  # %.17g: exact up to renorm
     np.testing.assert_allclose(data.wo, wo, rtol=0, atol=1e-15)
     np.testing.assert_array_equal(data.values, rgb)  # kept as they are, negatives too
-    expected_valid = (wi[:, 2] > 0) & (wo[:, 2] > 0) & (rgb >= 0).all(axis=1)
-    np.testing.assert_array_equal(data.valid, expected_valid)
+    above = (wi[:, 2] > 0) & (wo[:, 2] > 0)
+    # an RGB table: a negative channel is that channel "not measured", the others stay
+    np.testing.assert_array_equal(data.channel_valid, above[:, None] & (rgb >= 0))
+    np.testing.assert_array_equal(data.valid, above & (rgb >= 0).any(axis=1))
     np.testing.assert_array_equal(data.weights, w if weighted else (2 * np.pi) ** 2 / n)
     assert ("uniform weights" in data.source) != weighted
 
@@ -170,7 +172,9 @@ def test_spectral_table_becomes_linear_srgb(tmp_path):
     data = read_table(path)
     np.testing.assert_allclose(data.values, spectrum_to_rgb(wl, spectra), rtol=1e-12)
     np.testing.assert_allclose(data.values[0], 2.0, rtol=1e-12)
-    assert not data.valid[1] and data.valid[0]
+    # a spectral table is signed: the out-of-gamut red is a measured colour, kept whole
+    assert data.valid[1] and data.valid[0] and data.channel_valid[:2].all()
+    assert (data.values[1] < 0).any()
     assert "400-700 nm" in data.source and "outside the sRGB gamut" in data.source
     np.savez(tmp_path / "s.npz", wi=wi, wo=wo, spectra=spectra, wavelengths=wl)
     np.testing.assert_array_equal(read_table(tmp_path / "s.npz").values, data.values)
@@ -201,7 +205,7 @@ GOOD = DIRS + ",r,g,b\n0,0,1,0,0,1,0.1,0.2,0.3\n0.6,0,0.8,0,0,1,0.1,0.2,0.3\n"
         (DIRS + ",r,g,b\n0,0,1,0,0,1,1,1,1\n0,0,1,0,0,1,1,1\n", "not a numeric CSV"),
         (DIRS + ",r,g,b\n0,0,1,0,0,1,1,x,1\n", "not a numeric CSV"),
         (DIRS + ",r,g,b,weight\n0,0,1,0,0,1,1,1,1,-2\n", "negative weight"),
-        (DIRS + ",r,g,b\n0,0,-1,0,0,1,1,1,1\n0,0,1,0,0,1,-1,1,1\n", "no valid sample"),
+        (DIRS + ",r,g,b\n0,0,-1,0,0,1,1,1,1\n0,0,1,0,0,1,-1,-1,-1\n", "no valid sample"),
         (DIRS + ",r,g,b\n0,0,1,0,0,1,1,1\n", "the header names 9 columns but the rows hold 8"),
     ],
 )
