@@ -65,10 +65,13 @@ def test_info_says_how_many_cells_are_masked_and_why(tmp_path, capsys):
     code, out, _ = _run(capsys, "info", path)
     assert code == 0
     line = next(x for x in out.splitlines() if x.startswith("masked"))
-    total = n_below + n_every + n_one
+    total = n_below + n_every
+    # a cell with only its blue negative keeps red and green in the fit (issue 28)
+    neg = n_every + n_one
     assert line.split(None, 1)[1] == (
-        f"{total:,} of 1,458,000 samples: {n_below:,} below the horizon, {n_every:,} not "
-        f"measured (every channel negative), {n_one:,} with a negative channel (the others not)"
+        f"{total:,} of 1,458,000 samples: {n_below:,} below the horizon, {n_every:,} with no "
+        f"channel measured; channels masked inside the cut: R {n_every:,} negative (not "
+        f"measured), G {n_every:,} negative (not measured), B {neg:,} negative (not measured)"
     )
 
 
