@@ -6,8 +6,10 @@ a matplotlib :class:`~matplotlib.figure.Figure` (``constrained_layout``, not reg
 with pyplot, so nothing needs closing); nothing here calls a solver. The images and
 curves come from :mod:`brdffit.render` (sphere set-up, lightings, nearest-bin lookup of
 the data, which needs samples on the MERL grid or a strided sub-grid of it, and tone
-map); this module lays them out. A bin marked invalid (not measured, or its centre
-below the horizon) gives NaN and is drawn in magenta, never as black.
+map); this module lays them out. Data spheres are drawn from the data that exist (an
+unmeasured bin takes its nearest measured bin's value); differences are shown in colour,
+as CIEDE2000 between data and fit, and only where the data were measured (grey
+elsewhere). A pixel with no data at all is magenta, never black.
 
 Exposure: the same for data and fit, ``1 / (99th percentile of the fit's brightest
 channel on the sphere)`` unless given, and printed on the figure.
@@ -27,6 +29,7 @@ from brdffit.render import (
     DEFAULT_LIGHT,
     Environment,
     Fit,
+    delta_e,
     in_plane_directions,
     merl_stride,
     model_brdf,
@@ -38,9 +41,9 @@ from brdffit.render import (
 from brdffit.result import FitResult
 
 INVALID_RGBA = (1.0, 0.0, 1.0, 1.0)
-"""Magenta: pixels whose data bin is not measured."""
-LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
-"""Rec. 709 / sRGB luminance weights of linear RGB."""
+"""Magenta: pixels with no data at all."""
+UNMEASURED_RGBA = (0.75, 0.75, 0.75, 1.0)
+"""Grey: difference pixels whose data rest on unmeasured bins (filled for display only)."""
 
 
 # --------------------------------------------------------------------------- sphere
@@ -66,13 +69,15 @@ def sphere_figure(
     environment: Environment | None = None,
     exposure: tuple[float, float] | None = None,
 ):
-    """Spheres from the data and from the fit, and their difference, under two lightings.
+    """Spheres from the data and from the fit, and their colour difference, two lightings.
 
     Rows: the point light, then the environment (:mod:`brdffit.render`). Columns: data
-    (nearest bin), fit, and the luminance of ``(data - fit) x exposure`` (display units,
-    1 = white) on a diverging scale (:func:`~brdffit.render.sphere_images`). Magenta:
-    data not measured (under the environment: more than 5% of a pixel's cosine weight
-    missing; less is left out of the data and of the difference).
+    (nearest bin; unmeasured bins filled from the nearest measured one), fit, and the
+    CIEDE2000 difference of the two as displayed (:func:`~brdffit.render.delta_e`),
+    grey where the data were not measured (under the environment: more than 5% of a
+    pixel's cosine weight on unmeasured bins). Under each difference: the mean colour
+    ratio data / fit per channel over the measured pixels, the tint a grey difference
+    would hide.
 
     Arguments:
     - ``fit``: a :class:`FitResult` or ``(model, params)``; ``data``: MERL-grid measurements.
@@ -86,25 +91,45 @@ def sphere_figure(
     axes = fig.subplots(2, 3)
     lightings = (("point light", {"light": light}), ("environment", {"environment": env}))
     for row, (name, kw) in enumerate(lightings):
-        measured, fitted, difference = sphere_images(fit, data, size, **kw)
+        shown, fitted, measured = sphere_images(fit, data, size, **kw)
         e = exposure[row] if exposure else _auto_exposure(fitted, inside)
-        diff = np.where(inside, (difference @ LUMINANCE) * e, np.nan)
-        finite = np.abs(diff[np.isfinite(diff)])
-        lim = max(float(np.percentile(finite, 99)) if finite.size else 0.0, 0.02)
-        axes[row, 0].imshow(_sphere_rgba(measured, inside, e), interpolation="nearest")
+        diff = np.where(inside, delta_e(measured, fitted, e), np.nan)
+        finite = diff[np.isfinite(diff)]
+        lim = max(float(np.percentile(finite, 99)) if finite.size else 0.0, 5.0)
+        axes[row, 0].imshow(_sphere_rgba(shown, inside, e), interpolation="nearest")
         axes[row, 1].imshow(_sphere_rgba(fitted, inside, e), interpolation="nearest")
-        im = axes[row, 2].imshow(diff, cmap="RdBu_r", vmin=-lim, vmax=lim, interpolation="nearest")
+        im = axes[row, 2].imshow(diff, cmap="magma", vmin=0, vmax=lim, interpolation="nearest")
         bad = np.zeros((size, size, 4))
-        bad[inside & np.isnan(measured).any(axis=-1)] = INVALID_RGBA
+        bad[inside & np.isnan(measured).any(axis=-1)] = UNMEASURED_RGBA
         axes[row, 2].imshow(bad, interpolation="nearest")
-        fig.colorbar(im, ax=axes[row, 2], shrink=0.85, label="(data - fit) luminance x exposure")
-        for ax, what in zip(axes[row], ("data", "fit", "difference"), strict=True):
+        fig.colorbar(im, ax=axes[row, 2], shrink=0.85, label="CIEDE2000, data vs fit")
+        for ax, what in zip(axes[row], ("data", "fit", "colour difference"), strict=True):
             ax.set_title(f"{what}, {name}", fontsize=9)
             ax.set_axis_off()
         note = f"exposure {e:.3g}, sRGB"
         axes[row, 0].text(0, -0.04, note, transform=axes[row, 0].transAxes, fontsize=7, va="top")
-    fig.suptitle(f"{_name(fit)} on {_short(data.source)}; magenta: not measured", fontsize=10)
+        ratio = colour_ratio(measured, fitted, inside)
+        axes[row, 2].text(
+            0,
+            -0.04,
+            "data / fit: " + "  ".join(f"{c} {r:.3f}" for c, r in zip("RGB", ratio, strict=True)),
+            transform=axes[row, 2].transAxes,
+            fontsize=7,
+            va="top",
+        )
+    fig.suptitle(
+        f"{_name(fit)} on {_short(data.source)}; grey: not measured (data shown filled)",
+        fontsize=10,
+    )
     return fig
+
+
+def colour_ratio(data: np.ndarray, fit: np.ndarray, inside: np.ndarray) -> np.ndarray:
+    """(3,) mean radiance of the data over that of the fit per channel, over the pixels
+    where the data image is finite (NaN where the fit's mean is 0)."""
+    ok = inside & np.isfinite(data).all(axis=-1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return data[ok].sum(axis=0) / fit[ok].sum(axis=0)
 
 
 # --------------------------------------------------------------------------- in-plane curves
@@ -151,12 +176,17 @@ def polar_figure(
 # --------------------------------------------------------------------------- half/difference
 
 
-def halfdiff_figure(fit: Fit, data: Measurements, *, channel: int = 1, phi_d_deg: float = 90.0):
+def halfdiff_figure(
+    fit: Fit, data: Measurements, *, channel: int | None = None, phi_d_deg: float = 90.0
+):
     """Images over (theta_h, theta_d) of data, fit and ``ln(data / fit)``, one channel.
 
     The slice is the data's ``phi_d`` bin nearest ``phi_d_deg`` (the actual value is in
     the title); the fit is evaluated at the same bin-centre directions. theta_h runs on
-    MERL's square-root axis (bin index), labelled in degrees. Grey: not measured.
+    MERL's square-root axis (bin index), labelled in degrees. Grey: not measured (or a
+    value <= 0, which has no logarithm). ``channel`` None shows the channel with the
+    largest RMS ``ln(data / fit)`` over the slice, and the title gives all three, so a
+    colour error shows even where the luminance fits.
     """
     _, f_model = model_brdf(fit)
     stride = merl_stride(data)
@@ -164,13 +194,18 @@ def halfdiff_figure(fit: Fit, data: Measurements, *, channel: int = 1, phi_d_deg
     pd_axis = data.phi_d.reshape(shape)[0, 0]
     k = int(np.argmin(np.abs(pd_axis - np.deg2rad(phi_d_deg))))
     cells = np.arange(data.n).reshape(shape)[:, :, k].ravel()
-    valid = data.valid[cells]
-    f_data = np.where(valid, data.values[cells, channel], np.nan).reshape(shape[:2])
-    f_fit = f_model(data.wi[cells], data.wo[cells])[:, channel].reshape(shape[:2])
+    f_all = np.where(data.channel_valid[cells], data.values[cells], np.nan)
+    fit_all = f_model(data.wi[cells], data.wo[cells])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratios = np.log(f_all / fit_all)
+    ratios[~np.isfinite(ratios)] = np.nan
+    rms = np.array([np.sqrt(np.nanmean(r**2)) if np.isfinite(r).any() else 0.0 for r in ratios.T])
+    channel = int(np.argmax(rms)) if channel is None else channel
+    f_data = f_all[:, channel].reshape(shape[:2])
+    f_fit = fit_all[:, channel].reshape(shape[:2])
+    ratio = ratios[:, channel].reshape(shape[:2])
     with np.errstate(divide="ignore", invalid="ignore"):
         log_data, log_fit = np.log10(f_data), np.log10(f_fit)
-        ratio = np.log(f_data / f_fit)
-    ratio[~np.isfinite(ratio)] = np.nan
     u_edges = np.arange(shape[0] + 1) * stride[0] / MERL_SHAPE[0]  # u = sqrt(theta_h / 90 deg)
     td_edges = np.arange(shape[1] + 1) * stride[1] * 90.0 / MERL_SHAPE[1]
     both = np.concatenate([log_data[np.isfinite(log_data)], log_fit[np.isfinite(log_fit)]])
@@ -195,9 +230,11 @@ def halfdiff_figure(fit: Fit, data: Measurements, *, channel: int = 1, phi_d_deg
         ax.set_xlabel("theta_h (deg, square-root axis)")
         ax.set_title(title, fontsize=9)
     axes[0].set_ylabel("theta_d (deg)")
+    per = ", ".join(f"{c} {v:.3f}" for c, v in zip("RGB", rms, strict=True))
     fig.suptitle(
         f"{_name(fit)} on {_short(data.source)}: channel {'RGB'[channel]}, slice phi_d = "
-        f"{np.rad2deg(pd_axis[k]):.1f} deg; grey: not measured",
+        f"{np.rad2deg(pd_axis[k]):.1f} deg; grey: not measured\n"
+        f"RMS ln(data / fit) over the slice: {per}",
         fontsize=10,
     )
     return fig

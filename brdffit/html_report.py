@@ -211,10 +211,12 @@ def fit_html(
             _figure(
                 figures.sphere_figure(result, data, size=sphere_size),
                 "lit spheres",
-                "Spheres from the data (nearest MERL bin) and from the fit, and the "
-                "luminance of their difference, under a distant point light (top) and a "
-                "sky/ground environment (bottom). Tone map: exposure as printed, clipped, "
-                "sRGB transfer curve.",
+                "Spheres from the data (nearest MERL bin; bins not measured filled from the "
+                "nearest measured one) and from the fit, and their colour difference "
+                "(CIEDE2000 as displayed; grey where the data were not measured; below it "
+                "the mean colour ratio data / fit per channel), under a distant point "
+                "light (top) and a sky/ground environment (bottom). Tone map: exposure as "
+                "printed, clipped, sRGB transfer curve.",
             ),
             _figure(
                 figures.polar_figure(result, data),
@@ -226,7 +228,8 @@ def fit_html(
                 figures.halfdiff_figure(result, data),
                 "theta_h x theta_d images",
                 "log10 f of data and fit over theta_h (square-root axis) and theta_d at "
-                "phi_d near 90 deg, and ln(data / fit).",
+                "phi_d near 90 deg, and ln(data / fit), for the channel the fit misses "
+                "most (the title gives all three).",
             ),
         ]
     except MeasurementsError as e:

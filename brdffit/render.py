@@ -14,8 +14,11 @@ Fit side (:func:`model_brdf`): a fit (a :class:`~brdffit.result.FitResult`, or a
 Data side (:func:`nearest_bin`): samples on the MERL grid or a strided sub-grid of it
 (:func:`brdffit.merl.merl_grid`, :func:`merl_stride`), read by nearest-bin lookup, the
 MERL reader's rule (:func:`brdffit.geometry.merl_indices`), a strided sample standing for
-its whole coarse cell. A bin marked invalid (not measured, or its centre below the
-horizon) gives NaN.
+its whole coarse cell. A channel of a bin that is not fitted (not measured, outside the
+reader's cut, or the bin centre below the horizon) gives NaN; with ``fill=True`` it takes
+the value of the nearest bin, in grid-index distance, whose channel is measured (so a
+file cut at 85 degrees, or with holes, still draws a whole sphere from the data that
+exist; :func:`sphere_images` says which pixels rest on filled bins).
 
 Sphere set-up (:func:`render_sphere`, :func:`sphere_images`): a unit sphere seen by an
 orthographic camera along -z (image up = +y, right = +x; :func:`sphere_normals`), so
@@ -111,20 +114,46 @@ def merl_stride(data: Measurements) -> tuple[int, int, int]:
     )
 
 
-def nearest_bin(data: Measurements, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
+def nearest_bin(
+    data: Measurements, wi: np.ndarray, wo: np.ndarray, *, fill: bool = False
+) -> np.ndarray:
     """Data values (n, 3) in 1/sr at arbitrary directions, by nearest MERL bin.
 
     As MERL's ``lookup_brdf_val`` (:func:`brdffit.merl.lookup`), on the full grid or a
     strided one (a sample stands for its coarse cell). Directions below the horizon give
-    0; a bin that ``data.valid`` marks invalid gives NaN.
+    0; a channel that ``data.channel_valid`` marks unfitted gives NaN, or with ``fill``
+    the value of the nearest bin whose channel is measured (:func:`filled_values`).
     """
     stride = np.array(merl_stride(data))
     shape = tuple(int(n) for n in np.array(MERL_SHAPE) // stride)
     th, td, pd, _ = io_to_halfdiff(wi, wo)
     fine = merl_indices(th, td, pd)
     flat = np.ravel_multi_index(tuple(i // s for i, s in zip(fine, stride, strict=True)), shape)
-    out = np.where(data.valid[flat, None], data.values[flat], np.nan)
+    if fill:
+        out = filled_values(data, shape)[flat]
+    else:
+        out = np.where(data.channel_valid[flat], data.values[flat], np.nan)
     out[~above_horizon(wi, wo)] = 0.0
+    return out
+
+
+def filled_values(data: Measurements, shape: tuple[int, int, int]) -> np.ndarray:
+    """(N, 3) ``data.values`` with every unfitted channel replaced by that channel's value
+    in the nearest fitted bin (Euclidean distance in (theta_h, theta_d, phi_d) bin
+    indices; ``scipy.ndimage.distance_transform_edt``). A channel with no fitted bin
+    stays NaN."""
+    from scipy.ndimage import distance_transform_edt
+
+    out = np.full(data.values.shape, np.nan)
+    for c in range(3):
+        ok = data.channel_valid[:, c]
+        if not ok.any():
+            continue
+        idx = distance_transform_edt(
+            ~ok.reshape(shape), return_distances=False, return_indices=True
+        )
+        source = np.ravel_multi_index(tuple(idx), shape).ravel()
+        out[:, c] = data.values[source, c]
     return out
 
 
@@ -299,6 +328,25 @@ def render_sphere(
     return q.integrate(q.evaluate(brdf), max_missing)
 
 
+def delta_e(a: np.ndarray, b: np.ndarray, exposure: float) -> np.ndarray:
+    """CIEDE2000 colour difference (..., ) of two linear-RGB radiance images as displayed.
+
+    Each image is scaled by ``exposure`` and clipped to [0, 1] (what :func:`tonemap`
+    shows), read as linear sRGB, taken to CIE XYZ and CIELAB (D65 white) and compared
+    with the CIEDE2000 formula (``colour-science``). 1 is about a just noticeable
+    difference; a hue shift counts as much as a change of lightness. NaN in either
+    image gives NaN.
+    """
+    import colour
+
+    def lab(x: np.ndarray) -> np.ndarray:
+        rgb = np.clip(exposure * np.nan_to_num(x), 0.0, 1.0)
+        return colour.XYZ_to_Lab(colour.RGB_to_XYZ(rgb, "sRGB"))
+
+    out = np.asarray(colour.delta_E(lab(a), lab(b), method="CIE 2000"), float)
+    return np.where(np.isnan(a).any(axis=-1) | np.isnan(b).any(axis=-1), np.nan, out)
+
+
 def tonemap(radiance: np.ndarray, exposure: float) -> np.ndarray:
     """Display sRGB in [0, 1]: the sRGB transfer curve of ``clip(exposure radiance, 0, 1)``."""
     x = np.clip(exposure * np.nan_to_num(radiance), 0.0, 1.0)
@@ -314,18 +362,21 @@ def sphere_images(
     environment: Environment | None = None,
     max_missing: float = 0.05,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Radiance images (size, size, 3) of the data, the fit, and data minus fit.
+    """Radiance images (size, size, 3) of the data, the fit, and the data as measured.
 
-    Each is :func:`render_sphere` (same arguments) of the data by :func:`nearest_bin`,
-    of the fit, and of ``f_data - f_fit`` per direction, so that the directions the
-    data miss are left out of both sides of the difference alike.
+    The data image is :func:`render_sphere` (same arguments) of the data by
+    :func:`nearest_bin` with unmeasured bins filled from their nearest measured bin, so
+    it is whole wherever the data exist; the fit's is of the model. The third image is
+    the data without filling: NaN where unmeasured directions carry more than
+    ``max_missing`` of a pixel's cosine weight. Compare data and fit where it is finite.
     """
     _, f_model = model_brdf(fit)
     merl_stride(data)  # fail early, naming the data, when they are not on a grid
     q = _quadrature(size, light, environment)
+    f_filled = q.evaluate(lambda wi, wo: nearest_bin(data, wi, wo, fill=True))
     f_data = q.evaluate(lambda wi, wo: nearest_bin(data, wi, wo))
     f_fit = q.evaluate(f_model)
-    return tuple(q.integrate(f, max_missing) for f in (f_data, f_fit, f_data - f_fit))
+    return tuple(q.integrate(f, max_missing) for f in (f_filled, f_fit, f_data))
 
 
 # --------------------------------------------------------------------------- in-plane directions

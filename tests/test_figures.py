@@ -97,12 +97,15 @@ def test_sphere_from_lambert_data_equals_the_model(lambert_data, lighting):
     # the bins that miss are those with centres below the horizon (grazing); under the
     # environment a pixel is kept only when none of its directions misses (max_missing=0)
     kw = {"environment": Environment()} if lighting == "environment" else {}
-    measured, fitted, diff = sphere_images(LAMBERT, lambert_data, 32, max_missing=0.0, **kw)
+    shown, fitted, measured = sphere_images(LAMBERT, lambert_data, 32, max_missing=0.0, **kw)
     _, inside = sphere_normals(32)
     ok = inside & np.isfinite(measured).all(axis=-1)
     assert ok.sum() > {"light": 0.9, "environment": 0.3}[lighting] * inside.sum()
     assert np.abs(measured[ok] - fitted[ok]).max() < 1e-12
-    assert np.nanmax(np.abs(diff)) < 1e-12
+    # the shown data sphere is whole: the grazing bins are filled from measured ones,
+    # which hold the same constant here
+    assert np.isfinite(shown[inside]).all()
+    assert np.abs(shown[inside] - fitted[inside]).max() < 1e-12
 
 
 def test_sphere_figure_panels(lambert_data):
@@ -111,11 +114,37 @@ def test_sphere_figure_panels(lambert_data):
     assert len(panels) == 6
     data_rgba, fit_rgba = (np.asarray(panels[i].images[0].get_array()) for i in (0, 1))
     _, inside = sphere_normals(32)
-    measured = ~np.all(data_rgba == (1.0, 0.0, 1.0, 1.0), axis=-1) & inside
-    assert np.abs(data_rgba[measured] - fit_rgba[measured]).max() < 1e-9
-    assert np.nanmax(np.abs(panels[2].images[0].get_array())) < 1e-9
+    assert not np.all(data_rgba[inside] == (1.0, 0.0, 1.0, 1.0), axis=-1).any()  # no magenta
+    assert np.abs(data_rgba[inside] - fit_rgba[inside]).max() < 1e-9
+    assert np.nanmax(np.abs(panels[2].images[0].get_array())) < 1e-6  # CIEDE2000
     _labels_inside(fig)
     plt.close(fig)
+
+
+def test_a_colour_error_of_equal_luminance_shows_in_the_difference(lambert_data):
+    """A fit with the data's luminance and another hue (teal data, pink fit): the
+    luminance of the difference is 0, its colour difference is not."""
+    lum = np.array([0.2126, 0.7152, 0.0722])
+    pink = np.array([0.8, 0.35, 0.5])
+    pink *= (KD @ lum) / (pink @ lum)
+    fig = sphere_figure((LAMBERT[0], {"kd": pink}), lambert_data, size=32)
+    de = np.asarray(fig.axes[2].images[0].get_array())
+    assert np.nanmedian(de[sphere_normals(32)[1]]) > 10  # far beyond a just noticeable 1
+    text = " ".join(t.get_text() for t in fig.axes[2].texts)
+    ratio = KD / pink
+    assert all(f"{c} {r:.3f}" in text for c, r in zip("RGB", ratio, strict=True)), text
+    plt.close(fig)
+
+
+def test_a_sphere_with_a_hole_in_the_data_is_drawn_whole(lambert_data):
+    """Unmeasured bins (a third of the grid, every channel) are filled for display from
+    measured neighbours; the difference panel marks them instead of comparing."""
+    holes = np.arange(lambert_data.n) % 3 == 0
+    data = lambert_data.replace(valid=lambert_data.valid & ~holes)
+    shown, fitted, measured = sphere_images(LAMBERT, data, 24, environment=Environment())
+    _, inside = sphere_normals(24)
+    assert np.isfinite(shown[inside]).all()
+    assert np.isnan(measured[inside]).any()
 
 
 def test_tonemap_is_srgb():
