@@ -29,7 +29,7 @@ import numpy as np
 
 from brdffit.atomic import write_text
 from brdffit.crossrank import SweepResults
-from brdffit.errors import BrdffitError, MeasurementsError
+from brdffit.errors import MeasurementsError
 from brdffit.measurements import Measurements
 from brdffit.result import FitResult
 
@@ -38,13 +38,14 @@ body { font: 14px/1.45 system-ui, sans-serif; margin: 1.5em auto; max-width: 125
        padding: 0 1em; color: #222; }
 h1 { font-size: 1.5em; } h2 { font-size: 1.25em; border-bottom: 1px solid #ccc; }
 h3 { font-size: 1.05em; }
-table { border-collapse: collapse; margin: 0.6em 0 1.2em; font-size: 13px; }
-th, td { border: 1px solid #ccc; padding: 2px 8px; text-align: left; }
+table { border-collapse: collapse; margin: 0.6em 0 1.2em; font-size: 13px; max-width: 100%; }
+th, td { border: 1px solid #ccc; padding: 2px 8px; text-align: left; overflow-wrap: anywhere; }
 th { background: #eef1f5; } td.num { text-align: right; font-variant-numeric: tabular-nums; }
 tr:nth-child(even) td { background: #fafafa; }
 img { max-width: 100%; height: auto; display: block; margin: 0.3em 0; }
 figure { margin: 0.8em 0 1.6em; } figcaption { font-size: 12px; color: #555; }
-pre { background: #f6f6f6; padding: 0.6em; overflow-x: auto; font-size: 12px; }
+pre { background: #f6f6f6; padding: 0.6em; font-size: 12px; white-space: pre-wrap;
+      overflow-wrap: anywhere; }
 .warn { color: #a33; } .note { color: #555; font-size: 13px; }
 """
 
@@ -136,19 +137,12 @@ def _fmt(x: float, spec: str = ".6g") -> str:
 
 def _parameter_rows(result: FitResult) -> list[list[str]]:
     """One row per scalar: value, standard error, relative error, start, flags."""
-    from brdffit.plots import model_of
-
-    try:
-        bounds = {p.name: p.bounds for p in model_of(result).parameters}
-    except BrdffitError:
-        bounds = {}
     rows = []
     for name, value in result.params.items():
         flat = np.atleast_1d(np.asarray(value, float))
         init = np.atleast_1d(np.asarray(result.init_params.get(name, np.nan), float))
         init = np.broadcast_to(init, flat.shape)
         err = None if result.stderr is None else np.atleast_1d(result.stderr[name])
-        lo, hi = bounds.get(name, (-np.inf, np.inf))
         for c, v in enumerate(flat):
             label = name if flat.size == 1 else f"{name}[{'rgb'[c]}]"
             flags = []
@@ -159,8 +153,10 @@ def _parameter_rows(result: FitResult) -> list[list[str]]:
                 e = float(err[c]) if err is not None else math.nan
                 e_txt = _fmt(e, ".3g") if err is not None else "none"
                 rel = f"{abs(e / v) * 100:.3g}%" if v != 0 and math.isfinite(e) else "n/a"
-                if name in result.at_bound and min(abs(v - lo), abs(v - hi)) <= 1e-6:
+                if label in result.at_bound:
                     flags.append("at bound")
+                if label in result.not_identified:
+                    flags.append("not identified")
                 if np.isclose(v, init[c], rtol=1e-9, atol=0):
                     flags.append("did not move")
             rows.append([label, _fmt(float(v)), e_txt, rel, _fmt(float(init[c]), ".4g")])
@@ -181,7 +177,7 @@ def _fit_statistics(result: FitResult) -> list[list[str]]:
         ["other metrics (same samples)", others or "none"],
         ["angle cut", cut],
         ["noise model", describe(result.errors_method, result.error_blocks)],
-        ["status", f"{result.status.name}: {result.status.value}"],
+        ["status", result.status.value],
         ["steps", f"{result.n_steps} (best of {result.n_starts} starts)"],
         ["samples", f"{result.n_samples} ({result.n_data} residuals), {result.n_free} free"],
         ["AIC / BIC", f"{_fmt(result.aic)} / {_fmt(result.bic)} (n = residuals)"],

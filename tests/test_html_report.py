@@ -111,8 +111,10 @@ def test_fit_page_tables_and_figures(fit_page):
     text = " ".join(p.text)
     sizes = _pngs(p)
     assert len(sizes) == 3 and all(w > 300 and h > 200 for w, h in sizes)
-    for part in ("metric low_e2", "0.00125", "MAX_STEPS", "kd[r]", "kd[b]", "n/a", "ngan"):
+    for part in ("metric low_e2", "0.00125", "not converged", "kd[r]", "kd[b]", "n/a", "ngan"):
         assert part in text, part
+    assert "MAX_STEPS:" not in text  # the status once, in words
+    assert "MERL grid at stride 9 9 9" in text  # not "scattered directions"
     assert "synthetic <lambert> & co" in text  # escaped in the file, read back intact
     assert "Warning: kd[b] has no standard error" in text
 
@@ -213,3 +215,18 @@ def test_report_renders_in_headless_chromium(fit_page, tmp_path):
     # the spheres are drawn in colour: many pixels far from grey
     chroma = img.max(axis=-1) - img.min(axis=-1)
     assert (chroma > 0.2).sum() > 2000
+
+
+def test_flags_column_names_scalars_at_a_bound(tmp_path, lambert_data):
+    """The at-bound flag of the text report reaches the HTML flags column (it was empty:
+    the check looked up the parameter's name where the result lists channel labels)."""
+    res = _result()
+    res = FitResult.from_dict(
+        {**res.to_dict(), "params": {"kd": [0.2, 0.0, 0.8]}, "at_bound": ["kd[g]"]}
+    )
+    assert "kd[g]" in res.at_bound
+    p = _parse(write_fit_html(tmp_path / "b.html", res, lambert_data, sphere_size=32))
+    plt.close("all")
+    cells = [t.strip() for t in p.text if t.strip()]
+    row = cells[cells.index("kd[g]") : cells.index("kd[g]") + 6]
+    assert row[-1].startswith("at bound"), row
