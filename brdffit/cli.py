@@ -219,8 +219,10 @@ def cmd_sweep(args) -> None:
         screen=args.screen,
         seed=args.seed,
         jobs=args.jobs,
+        scheduler=args.scheduler,
         progress=not args.no_progress,
         simplify=args.simplify,
+        announce=lambda line: print(line, file=sys.stderr),
     )
     print(
         f"{s.out}: {s.n_tasks} tasks, {s.n_skipped} already done, {s.n_done} fitted now "
@@ -409,7 +411,17 @@ def build_parser() -> argparse.ArgumentParser:
         help="candidates spread over the ranges; the cheapest 8 become starts (0: none)",
     )
     s.add_argument("--seed", type=int, default=0)
-    s.add_argument("--jobs", type=int, default=None, help="worker processes (default: cores)")
+    s.add_argument(
+        "--jobs",
+        type=int,
+        default=None,
+        help="worker processes of the local Dask cluster (default: cores; 1: this process)",
+    )
+    s.add_argument(
+        "--scheduler",
+        metavar="ADDRESS",
+        help="run on the Dask cluster whose scheduler is at ADDRESS (tcp://host:8786)",
+    )
     s.add_argument(
         "--simplify",
         nargs="?",

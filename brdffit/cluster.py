@@ -48,10 +48,25 @@ def _client(scheduler: str | None, workers: int, dashboard: str | None, timeout:
         n_workers=max(1, workers),
         threads_per_worker=1,
         processes=True,
-        dashboard_address=dashboard,
+        dashboard_address=_free_port_or_any(dashboard),
         silence_logs=logging.ERROR,
     )
     return Client(cluster), cluster
+
+
+def _free_port_or_any(address: str | None) -> str | None:
+    """``address`` (``":8787"``) when its port is free here, else ``":0"`` (any free port:
+    a second sweep on one machine gets its own dashboard instead of Dask's warning)."""
+    if not address or not address.startswith(":"):
+        return address
+    import socket
+
+    with socket.socket() as s:
+        try:
+            s.bind(("", int(address[1:])))
+        except OSError:
+            return ":0"
+    return address
 
 
 try:  # the plugin must be a module-level class: Dask pickles it to every worker

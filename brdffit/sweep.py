@@ -11,10 +11,11 @@ written ``@`` and ``]`` dropped (``lafortune[n_lobes=2,anisotropic=true]`` ->
 ``lafortune@n_lobes=2@anisotropic=true``), so a model with default options keeps its
 plain name and older sweep folders resume. A task whose file exists and parses is
 finished and never redone, so an interrupted sweep resumes where it stopped; every file
-is written atomically by the worker that made it, so a kill loses at most the fits in
-flight. A fit that does not converge is a result
-(``converged`` false, ``status`` says why); an exception is written to
-``<stem>__<metric>.error.json`` and the task is tried again on the next run.
+is written atomically by this process as its result comes back from a worker, so a kill
+loses at most the fits in flight and workers need no file system in common with it. A
+fit that does not converge is a result (``converged`` false, ``status`` says why); an
+exception is written to ``<stem>__<metric>.error.json`` and the task is tried again on
+the next run.
 
 Times are measured in the worker the same way for every model: ``wall_time`` is the
 fit's own clock (:func:`brdffit.fit`, compile included on a worker's first fit of a
@@ -22,8 +23,10 @@ model and grid shape, so compare medians over materials); ``eval_ns_per_sample``
 the best of 3 warm calls of ``jax.jit(model.eval)`` at the fitted parameters on the
 material's valid directions tiled to ``eval_n`` samples.
 
-Workers are processes started with the ``spawn`` method (JAX is not fork-safe);
-``jobs=1`` runs the tasks in the calling process.
+Engine: Dask distributed (:mod:`brdffit.cluster`). With ``scheduler`` the tasks run on
+that cluster; without it on a LocalCluster of ``jobs`` worker processes (default one
+per core), so a lost worker's task is run again elsewhere and its result is still
+written once. ``jobs=1`` without a scheduler runs the tasks in the calling process.
 """
 
 from __future__ import annotations
@@ -43,7 +46,7 @@ import numpy as np
 from brdffit.atomic import remove_temporaries, write_text
 from brdffit.errors import SweepError
 from brdffit.families import family_of
-from brdffit.jobs import has_key, run_jobs, write_json
+from brdffit.jobs import has_key, write_json
 
 MANIFEST = "sweep.json"
 SETTINGS = ("stride", "cut_deg", "n_restarts", "screen", "seed", "max_steps", "eval_n")
@@ -296,13 +299,26 @@ def provenance() -> dict:
     }
 
 
-def run_task(task: Task, out: str) -> dict:
-    """Fit one task and write its result file atomically; returns a short status dict.
-
-    An exception is written to the task's ``.error.json`` instead (and returned).
-    """
-    path = task.path(Path(out))
+def write_outcome(out: Path, task: Task, outcome: dict) -> dict:
+    """Write :func:`fit_task`'s outcome under ``out`` atomically: the result file (and
+    remove an old ``.error.json``) or the error file; returns the short status."""
+    path = task.path(out)
     err_path = path.with_suffix(".error.json")
+    if outcome["ok"]:
+        write_json(path, outcome["result"])
+        err_path.unlink(missing_ok=True)
+    else:
+        write_json(err_path, outcome["error_record"])
+    return outcome["status"]
+
+
+def fit_task(task: Task) -> dict:
+    """Fit one task where this runs (a worker) and return what to write, nothing written.
+
+    Returns ``{"ok", "status", "result"}`` or, on an exception (recorded, the sweep goes
+    on), ``{"ok": False, "status", "error_record"}``.
+    """
+    name = task.path(Path(".")).name
     try:
         from brdffit import models
         from brdffit.fit import fit
@@ -336,13 +352,13 @@ def run_task(task: Task, out: str) -> dict:
             from brdffit.survival import sweep_reduction
 
             d["simplify"] = sweep_reduction(model, data, task.metric, r, s)
-        write_json(path, d)
-        err_path.unlink(missing_ok=True)
-        return {"ok": True, "converged": r.converged, "task": path.name}
+        status = {"ok": True, "converged": r.converged, "task": name}
+        return {"ok": True, "status": status, "result": d}
     except Exception as e:  # recorded, the sweep goes on
         info = {"material": task.material.name, "model": task.model, "metric": task.metric}
-        write_json(err_path, {**info, **_error(e), "traceback": traceback.format_exc()})
-        return {"ok": False, "converged": False, "task": path.name, "error": str(e)}
+        record = {**info, **_error(e), "traceback": traceback.format_exc()}
+        status = {"ok": False, "converged": False, "task": name, "error": str(e)}
+        return {"ok": False, "status": status, "error_record": record}
 
 
 def is_finished(path: Path, simplify: str | None = None) -> bool:
@@ -407,7 +423,9 @@ def run_sweep(
     eval_n: int = 65536,
     simplify: str | None = None,
     jobs: int | None = None,
+    scheduler: str | None = None,
     progress: bool = True,
+    announce=print,
 ) -> SweepSummary:
     """Fit every (material, model, metric) not yet finished in folder ``out``.
 
@@ -426,8 +444,13 @@ def run_sweep(
       (:func:`brdffit.survival.sweep_reduction`; read them with
       :func:`brdffit.survival.survival_table`). A finished fit without that record is done
       again, so ``--simplify`` can be added to a finished sweep.
-    - ``jobs``: worker processes (default ``os.cpu_count()``); 1 runs in this process.
+    - ``jobs``: worker processes of the LocalCluster (default ``os.cpu_count()``); 1
+      without ``scheduler`` runs in this process.
+    - ``scheduler``: a Dask scheduler address (``tcp://host:8786``) to run the tasks on
+      (module docstring); its workers need brdffit installed and the material files at
+      the same paths (or the synthetic recipe).
     - ``progress``: show a tqdm bar (tasks, materials finished, time left).
+    - ``announce``: gets the line naming the Dask scheduler and dashboard.
 
     Raises :class:`~brdffit.errors.ParameterError` for a bad model spec or metric and
     :class:`SweepError` for a bad setting or folder, before any fit.
@@ -466,7 +489,8 @@ def run_sweep(
     counts = {"done": 0, "unconverged": 0, "errors": 0}
     bar = _progress_bar(len(todo), len(materials), sum(v == 0 for v in left.values()), progress)
 
-    def record(task: Task, status: dict) -> None:
+    def record(task: Task, outcome: dict) -> None:
+        status = write_outcome(out, task, outcome)
         counts["done"] += status["ok"]
         counts["unconverged"] += status["ok"] and not status["converged"]
         counts["errors"] += not status["ok"]
@@ -480,12 +504,21 @@ def run_sweep(
 
     def crashed(t: Task, e: BaseException) -> dict:
         info = {"material": t.material.name, "model": t.model, "metric": t.metric}
-        write_json(t.path(out).with_suffix(".error.json"), {**info, **_error(e)})
-        return {"ok": False, "converged": False, "error": str(e)}
+        status = {"ok": False, "converged": False, "error": str(e)}
+        return {"ok": False, "status": status, "error_record": {**info, **_error(e)}}
 
-    work = functools.partial(run_task, out=str(out))
+    workers = jobs or os.cpu_count() or 1
     try:
-        run_jobs(todo, work, record, crashed, jobs or os.cpu_count() or 1)
+        if workers <= 1 and scheduler is None:
+            for t in todo:
+                record(t, fit_task(t))
+        else:
+            from brdffit.cluster import run_on_dask
+
+            run_on_dask(
+                todo, fit_task, record, crashed,
+                scheduler=scheduler, workers=workers, announce=announce,
+            )  # fmt: skip
     finally:
         bar.close()
     return SweepSummary(

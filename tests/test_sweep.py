@@ -282,3 +282,42 @@ def test_checkout_commit_reports_only_the_packages_own_checkout(tmp_path):
     assert checkout_commit(tmp_path / "site" / "brdffit") is None  # a copy inside a repo
     (tmp_path / "brdffit" / "__init__.py").write_text("changed = 1\n")
     assert checkout_commit(tmp_path / "brdffit") == own + "-dirty"
+
+
+def test_sweep_on_dask_survives_a_killed_worker(tmp_path):
+    """A worker process killed while the sweep runs: Dask runs its task again on another
+    worker and every result is written once (issue 31)."""
+    import threading
+
+    import psutil
+
+    out = tmp_path / "dask"
+    mats = synthetic_materials(4)
+    killed: list[int] = []
+
+    def kill_one_worker() -> None:
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline and not killed:
+            workers = []  # Dask's spawned worker processes (not multiprocessing's tracker)
+            for c in psutil.Process().children(recursive=True):
+                try:
+                    cmd = " ".join(c.cmdline())
+                except psutil.Error:  # gone, or a zombie
+                    continue
+                if "spawn_main" in cmd:
+                    workers.append(c)
+            if workers and _results(out):
+                workers[0].kill()
+                killed.append(workers[0].pid)
+            time.sleep(0.05)
+
+    watcher = threading.Thread(target=kill_one_worker, daemon=True)
+    watcher.start()
+    s = run_sweep(
+        out, mats, ["lambert", "walter"], ["low_e2"], **ARGS, jobs=2, progress=False,
+        announce=lambda line: None,
+    )  # fmt: skip
+    watcher.join(timeout=5)
+    assert killed, "no worker was killed while the sweep ran"
+    assert s.n_errors == 0 and s.n_done == 8
+    assert len(_results(out)) == 8 and not list(out.rglob("*.error.json"))
