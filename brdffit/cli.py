@@ -220,6 +220,7 @@ def cmd_sweep(args) -> None:
         seed=args.seed,
         jobs=args.jobs,
         scheduler=args.scheduler,
+        batch=args.batch,
         progress=not args.no_progress,
         simplify=args.simplify,
         announce=lambda line: print(line, file=sys.stderr),
@@ -421,6 +422,14 @@ def build_parser() -> argparse.ArgumentParser:
         "--scheduler",
         metavar="ADDRESS",
         help="run on the Dask cluster whose scheduler is at ADDRESS (tcp://host:8786)",
+    )
+    s.add_argument(
+        "--batch",
+        type=int,
+        default=1,
+        metavar="N",
+        help="fit up to N materials of one model and metric in one batched call (same "
+        "answers; faster on a GPU and on small grids)",
     )
     s.add_argument(
         "--simplify",

@@ -32,13 +32,11 @@ written once. ``jobs=1`` without a scheduler runs the tasks in the calling proce
 from __future__ import annotations
 
 import dataclasses
-import functools
 import json
 import os
 import time
-import traceback
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
@@ -46,7 +44,20 @@ import numpy as np
 from brdffit.atomic import remove_temporaries, write_text
 from brdffit.errors import SweepError
 from brdffit.families import family_of
-from brdffit.jobs import has_key, write_json
+from brdffit.jobs import has_key
+from brdffit.sweep_tasks import (  # noqa: F401 (the sweep's public names, re-exported)
+    Material,
+    Task,
+    _failure,
+    checkout_commit,
+    eval_cost,
+    file_stem,
+    fit_chunk,
+    fit_task,
+    load_material,
+    provenance,
+    write_outcome,
+)
 
 MANIFEST = "sweep.json"
 SETTINGS = ("stride", "cut_deg", "n_restarts", "screen", "seed", "max_steps", "eval_n")
@@ -58,48 +69,6 @@ _SYNTH = (
     ("fabric", "oren_nayar"),
     ("paint", "blinn_phong"),
 )
-
-
-@dataclass(frozen=True)
-class Material:
-    """One material of a sweep.
-
-    ``kind`` is ``"merl"``, ``"nbrdf"``, ``"rgl"``, ``"table"`` (``path`` the file) or
-    ``"synthetic"`` (``spec``: generating model, parameters, noise and seed).
-    """
-
-    name: str
-    family: str
-    kind: str
-    path: str | None = None
-    spec: dict | None = None
-
-
-def file_stem(label: str) -> str:
-    """The file-name form of a model label: ``name[k=v,k2=v2]`` -> ``name@k=v@k2=v2``.
-
-    Labels hold only letters, digits and ``_.+-=`` besides the brackets and commas
-    (:func:`brdffit.models.parse_spec`), so the stem is safe in a file name; a plain
-    name is its own stem.
-    """
-    return label.replace("[", "@").replace(",", "@").removesuffix("]")
-
-
-@dataclass(frozen=True)
-class Task:
-    """One (material, model, metric) fit and the settings shared by the sweep.
-
-    ``model`` is the model's label (:func:`brdffit.models.label`).
-    """
-
-    material: Material
-    model: str
-    metric: str
-    settings: dict = field(default_factory=dict)
-
-    def path(self, out: Path) -> Path:
-        """Result file ``<out>/<material>/<stem>__<metric>.json`` (:func:`file_stem`)."""
-        return Path(out) / self.material.name / f"{file_stem(self.model)}__{self.metric}.json"
 
 
 @dataclass(frozen=True)
@@ -202,165 +171,6 @@ def with_families(materials: Sequence[Material], families: dict[str, str]) -> li
     return [dataclasses.replace(m, family=families.get(m.name, m.family)) for m in materials]
 
 
-def load_material(material: Material, stride: tuple[int, int, int]):
-    """The :class:`Measurements` of ``material`` on the MERL grid of ``stride``."""
-    if material.kind == "synthetic":
-        from brdffit import models
-        from brdffit.synthetic import synthesize
-
-        s = material.spec
-        return synthesize(
-            models.get(s["model"]),
-            s["params"],
-            stride=stride,
-            noise_mult=s["noise_mult"],
-            seed=s["seed"],
-            source=f"synthetic {material.name} ({s['model']})",
-        )
-    from brdffit.loading import load_measurements
-
-    return load_measurements(material.path, stride=1 if material.kind == "table" else stride)
-
-
-_CACHE: dict = {}
-
-
-def _cached_data(material: Material, stride: tuple[int, int, int]):
-    key = (material.name, stride)
-    if key not in _CACHE:
-        _CACHE.clear()
-        _CACHE[key] = load_material(material, stride)
-    return _CACHE[key]
-
-
-def eval_cost(model, params: dict, data, *, n: int = 65536, repeats: int = 3) -> float:
-    """Best-of-``repeats`` warm time of ``jax.jit(model.eval)`` on ``n`` samples, ns/sample.
-
-    The directions are the valid samples of ``data`` tiled (or cut) to ``n``.
-    """
-    import jax
-    import jax.numpy as jnp
-
-    idx = np.resize(np.flatnonzero(data.valid), n)
-    wi, wo = jnp.asarray(data.wi[idx]), jnp.asarray(data.wo[idx])
-    p = {k: jnp.asarray(v) for k, v in params.items()}
-    f = jax.jit(model.eval)
-    f(p, wi, wo).block_until_ready()
-    best = np.inf
-    for _ in range(repeats):
-        t = time.perf_counter()
-        f(p, wi, wo).block_until_ready()
-        best = min(best, time.perf_counter() - t)
-    return float(best / n * 1e9)
-
-
-def checkout_commit(package_dir: Path) -> str | None:
-    """``git describe --always --dirty`` of the checkout whose top level holds
-    ``package_dir`` as ``<top>/<package name>``; ``None`` when there is none (an
-    installed copy, possibly inside some other repository, which it must not report)."""
-    import subprocess
-
-    def git(*args: str) -> str:
-        return subprocess.run(
-            ["git", "-C", str(package_dir), *args],
-            capture_output=True, text=True, timeout=10, check=True,
-        ).stdout.strip()  # fmt: skip
-
-    try:
-        top = Path(git("rev-parse", "--show-toplevel")).resolve()
-        if top / package_dir.name != package_dir.resolve():
-            return None
-        return git("describe", "--always", "--dirty") or None
-    except (OSError, subprocess.SubprocessError):
-        return None
-
-
-@functools.cache
-def provenance() -> dict:
-    """Where a result was computed: brdffit version and git commit, JAX backend, device.
-
-    Results from different fitter versions or devices must not be mixed unknowingly
-    in one report; the commit (``-dirty`` with uncommitted changes) is
-    :func:`checkout_commit` of the package, else ``$BRDFFIT_GIT_DESCRIBE`` (set by
-    whoever installed a copy), else ``None``.
-    """
-    import jax
-
-    import brdffit
-
-    here = Path(brdffit.__file__).resolve().parent
-    commit = checkout_commit(here) or os.environ.get("BRDFFIT_GIT_DESCRIBE") or None
-    return {
-        "brdffit": getattr(brdffit, "__version__", None),
-        "git": commit,
-        "jax": jax.__version__,
-        "backend": jax.default_backend(),
-        "device": str(jax.devices()[0].device_kind),
-    }
-
-
-def write_outcome(out: Path, task: Task, outcome: dict) -> dict:
-    """Write :func:`fit_task`'s outcome under ``out`` atomically: the result file (and
-    remove an old ``.error.json``) or the error file; returns the short status."""
-    path = task.path(out)
-    err_path = path.with_suffix(".error.json")
-    if outcome["ok"]:
-        write_json(path, outcome["result"])
-        err_path.unlink(missing_ok=True)
-    else:
-        write_json(err_path, outcome["error_record"])
-    return outcome["status"]
-
-
-def fit_task(task: Task) -> dict:
-    """Fit one task where this runs (a worker) and return what to write, nothing written.
-
-    Returns ``{"ok", "status", "result"}`` or, on an exception (recorded, the sweep goes
-    on), ``{"ok": False, "status", "error_record"}``.
-    """
-    name = task.path(Path(".")).name
-    try:
-        from brdffit import models
-        from brdffit.fit import fit
-
-        s = task.settings
-        data = _cached_data(task.material, tuple(s["stride"]))
-        model = models.from_spec(task.model)
-        r = fit(
-            model,
-            data,
-            task.metric,
-            cut_deg=s["cut_deg"],
-            n_restarts=s["n_restarts"],
-            screen=s["screen"],
-            seed=s["seed"],
-            max_steps=s["max_steps"],
-            throw=False,
-        )
-        d = json.loads(r.to_json())
-        ok = bool(np.isfinite(r.loss))  # an unconverged fit is ranked by its loss: time it too
-        ns = eval_cost(model, r.params, data, n=s["eval_n"]) if ok else None
-        d.update(
-            label=task.model,
-            material=task.material.name,
-            family=task.material.family,
-            eval_ns_per_sample=ns,
-            eval_n=s["eval_n"],
-            provenance=provenance(),
-        )
-        if s.get("simplify"):  # brdffit sweep --simplify: the reduction after the fit
-            from brdffit.survival import sweep_reduction
-
-            d["simplify"] = sweep_reduction(model, data, task.metric, r, s)
-        status = {"ok": True, "converged": r.converged, "task": name}
-        return {"ok": True, "status": status, "result": d}
-    except Exception as e:  # recorded, the sweep goes on
-        info = {"material": task.material.name, "model": task.model, "metric": task.metric}
-        record = {**info, **_error(e), "traceback": traceback.format_exc()}
-        status = {"ok": False, "converged": False, "task": name, "error": str(e)}
-        return {"ok": False, "status": status, "error_record": record}
-
-
 def is_finished(path: Path, simplify: str | None = None) -> bool:
     """True when ``path`` is a result file that parses and has a loss (and, with
     ``simplify``, a reduction made with that criterion: :func:`brdffit.survival.has_reduction`)."""
@@ -369,10 +179,6 @@ def is_finished(path: Path, simplify: str | None = None) -> bool:
 
         return has_reduction(path, simplify)
     return has_key(path, "loss")
-
-
-def _error(e: BaseException) -> dict:
-    return {"error": type(e).__name__, "message": str(e)}
 
 
 def _write_manifest(out: Path, materials, labels, metrics, settings: dict) -> dict:
@@ -424,6 +230,7 @@ def run_sweep(
     simplify: str | None = None,
     jobs: int | None = None,
     scheduler: str | None = None,
+    batch: int = 1,
     progress: bool = True,
     announce=print,
 ) -> SweepSummary:
@@ -449,6 +256,9 @@ def run_sweep(
     - ``scheduler``: a Dask scheduler address (``tcp://host:8786``) to run the tasks on
       (module docstring); its workers need brdffit installed and the material files at
       the same paths (or the synthetic recipe).
+    - ``batch``: fit up to this many materials of one model and metric in one
+      :func:`brdffit.fit_many` call (:func:`fit_chunk`; worth it on an accelerator, where
+      the problems are vmapped, and on small grids).
     - ``progress``: show a tqdm bar (tasks, materials finished, time left).
     - ``announce``: gets the line naming the Dask scheduler and dashboard.
 
@@ -489,7 +299,11 @@ def run_sweep(
     counts = {"done": 0, "unconverged": 0, "errors": 0}
     bar = _progress_bar(len(todo), len(materials), sum(v == 0 for v in left.values()), progress)
 
-    def record(task: Task, outcome: dict) -> None:
+    def record(chunk: Sequence[Task], outcomes: list[dict]) -> None:
+        for task, outcome in zip(chunk, outcomes, strict=True):
+            record_one(task, outcome)
+
+    def record_one(task: Task, outcome: dict) -> None:
         status = write_outcome(out, task, outcome)
         counts["done"] += status["ok"]
         counts["unconverged"] += status["ok"] and not status["converged"]
@@ -502,21 +316,22 @@ def run_sweep(
         )
         bar.update(1)
 
-    def crashed(t: Task, e: BaseException) -> dict:
-        info = {"material": t.material.name, "model": t.model, "metric": t.metric}
-        status = {"ok": False, "converged": False, "error": str(e)}
-        return {"ok": False, "status": status, "error_record": {**info, **_error(e)}}
+    def crashed(chunk: Sequence[Task], e: BaseException) -> list[dict]:
+        return [_failure(t, e) for t in chunk]
 
+    if batch < 1:
+        raise SweepError(f"batch={batch}; accepted: 1 or more materials per fit_many call")
+    chunks = _chunks(todo, batch)
     workers = jobs or os.cpu_count() or 1
     try:
         if workers <= 1 and scheduler is None:
-            for t in todo:
-                record(t, fit_task(t))
+            for c in chunks:
+                record(c, fit_chunk(c))
         else:
             from brdffit.cluster import run_on_dask
 
             run_on_dask(
-                todo, fit_task, record, crashed,
+                chunks, fit_chunk, record, crashed,
                 scheduler=scheduler, workers=workers, announce=announce,
             )  # fmt: skip
     finally:
@@ -530,6 +345,15 @@ def run_sweep(
         counts["errors"],
         time.perf_counter() - t0,
     )
+
+
+def _chunks(tasks: Sequence[Task], size: int) -> list[tuple[Task, ...]]:
+    """``tasks`` grouped by (model, metric), in order of first appearance, cut into
+    chunks of at most ``size``."""
+    groups: dict[tuple[str, str], list[Task]] = {}
+    for t in tasks:
+        groups.setdefault((t.model, t.metric), []).append(t)
+    return [tuple(g[i : i + size]) for g in groups.values() for i in range(0, len(g), size)]
 
 
 def _progress_bar(total: int, n_materials: int, n_finished: int, enabled: bool):

@@ -321,3 +321,26 @@ def test_sweep_on_dask_survives_a_killed_worker(tmp_path):
     assert killed, "no worker was killed while the sweep ran"
     assert s.n_errors == 0 and s.n_done == 8
     assert len(_results(out)) == 8 and not list(out.rglob("*.error.json"))
+
+
+def test_batched_sweep_gives_the_single_fits_answers(tmp_path):
+    """--batch: one fit_many call per chunk of materials, the same results as one fit
+    each (the same start policy), and each file says its batch size."""
+    mats = synthetic_materials(3)
+    kw = dict(ARGS, jobs=1, progress=False)
+    run_sweep(tmp_path / "one", mats, ["walter"], ["low_e2"], **kw)
+    run_sweep(tmp_path / "many", mats, ["walter"], ["low_e2"], **kw, batch=2)
+    one, many = _results(tmp_path / "one"), _results(tmp_path / "many")
+    assert [p.relative_to(tmp_path / "one") for p in one] == [
+        p.relative_to(tmp_path / "many") for p in many
+    ]
+    batches = []
+    for a, b in zip(one, many, strict=True):
+        ra, rb = json.loads(a.read_text()), json.loads(b.read_text())
+        assert rb["loss"] == pytest.approx(ra["loss"], rel=1e-9)
+        for k, v in ra["params"].items():
+            np.testing.assert_allclose(rb["params"][k], v, rtol=1e-7, atol=1e-12)
+        batches.append(rb["batch"])
+    assert sorted(batches) == [1, 2, 2]
+    with pytest.raises(SweepError, match="batch=0"):
+        run_sweep(tmp_path / "bad", mats, ["walter"], ["low_e2"], **kw, batch=0)
