@@ -47,6 +47,7 @@ from __future__ import annotations
 import os
 import re
 import warnings
+import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -110,10 +111,10 @@ def _read_csv(p: Path) -> dict[str, np.ndarray]:
                 data = np.loadtxt(f, delimiter=",", comments="#", ndmin=2, dtype=float)
     except MeasurementFileError:
         raise
-    except (UnicodeDecodeError, ValueError) as e:
-        raise MeasurementFileError(
-            p, f"not a numeric CSV table after the header (line {n_before}): {e}"
-        ) from None
+    except UnicodeDecodeError as e:
+        raise MeasurementFileError(p, f"not a UTF-8 text file: {e.reason}") from None
+    except ValueError:
+        raise MeasurementFileError(p, _bad_cell(p, n_before, names)) from None
     except OSError as e:
         raise MeasurementFileError(p, f"cannot be read: {e.strerror or e}") from None
     if data.size == 0:
@@ -126,7 +127,35 @@ def _read_csv(p: Path) -> dict[str, np.ndarray]:
     return {n: data[:, k] for k, n in enumerate(names)}
 
 
+def _bad_cell(p: Path, n_header: int, names: list[str]) -> str:
+    """Where and why ``np.loadtxt`` refused the CSV rows: the first data line (1-based
+    file line) with a field that is not a number or a wrong field count."""
+    with open(p, encoding="utf-8-sig") as f:
+        for number, line in enumerate(f, start=1):
+            text = line.split("#", 1)[0].strip()
+            if number <= n_header or not text:
+                continue
+            fields = text.split(",")
+            if len(fields) != len(names):
+                return (
+                    f"line {number} has {len(fields)} fields; the header names {len(names)} columns"
+                )
+            for k, field in enumerate(fields):
+                try:
+                    float(field)
+                except ValueError:
+                    return (
+                        f"line {number}, column {k + 1} ({names[k]!r}): {field.strip()!r} is "
+                        "not a number"
+                    )
+    return f"not a numeric CSV table after the header (line {n_header})"
+
+
 def _read_npz(p: Path) -> dict[str, np.ndarray]:
+    if not zipfile.is_zipfile(p):
+        raise MeasurementFileError(
+            p, "not a .npz archive (expected a zip of .npy arrays, as numpy.savez writes)"
+        )
     try:
         with np.load(p, allow_pickle=False) as z:
             names = [_norm(k) for k in z.files]
@@ -134,7 +163,7 @@ def _read_npz(p: Path) -> dict[str, np.ndarray]:
             raw = {n: np.asarray(z[k]) for n, k in zip(names, z.files, strict=True)}
     except MeasurementFileError:
         raise
-    except (OSError, ValueError, EOFError) as e:
+    except Exception as e:  # a damaged archive fails in zipfile, zlib or numpy's header parser
         raise MeasurementFileError(p, f"not a readable .npz archive: {e}") from None
     if not raw:
         raise MeasurementFileError(p, "empty archive: no arrays")

@@ -202,8 +202,8 @@ GOOD = DIRS + ",r,g,b\n0,0,1,0,0,1,0.1,0.2,0.3\n0.6,0,0.8,0,0,1,0.1,0.2,0.3\n"
         (DIRS + ",r,g,b\n0,0,1,0,0,1,nan,1,1\n", "non-finite"),
         (DIRS + ",r,g,b\n0,0,1,0,0,1,inf,1,1\n", "non-finite"),
         (DIRS + ",r,g,b\n0,0,2,0,0,1,1,1,1\n", "not a unit vector"),
-        (DIRS + ",r,g,b\n0,0,1,0,0,1,1,1,1\n0,0,1,0,0,1,1,1\n", "not a numeric CSV"),
-        (DIRS + ",r,g,b\n0,0,1,0,0,1,1,x,1\n", "not a numeric CSV"),
+        (DIRS + ",r,g,b\n0,0,1,0,0,1,1,1,1\n0,0,1,0,0,1,1,1\n", "line 3 has 8 fields"),
+        (DIRS + ",r,g,b\n0,0,1,0,0,1,1,x,1\n", "line 2, column 8 ('g')"),
         (DIRS + ",r,g,b,weight\n0,0,1,0,0,1,1,1,1,-2\n", "negative weight"),
         (DIRS + ",r,g,b\n0,0,-1,0,0,1,1,1,1\n0,0,1,0,0,1,-1,-1,-1\n", "no valid sample"),
         (DIRS + ",r,g,b\n0,0,1,0,0,1,1,1\n", "the header names 9 columns but the rows hold 8"),
@@ -220,7 +220,7 @@ def test_bad_csv_raises_naming_file_and_problem(tmp_path, text, needle):
 def test_bad_files_and_npz(tmp_path):
     cases = {
         tmp_path / "missing.csv": "no such file",
-        tmp_path / "junk.npz": "not a readable .npz",
+        tmp_path / "junk.npz": "not a .npz archive",
         tmp_path / "ragged.npz": "different lengths",
         tmp_path / "empty.npz": "empty archive",
         tmp_path / "nowl.npz": "needs a 1-D 'wavelengths'",
