@@ -348,11 +348,67 @@ def _start_sigmas(r0: np.ndarray, scales: np.ndarray, passes: int = 3) -> np.nda
     return np.sqrt(v)
 
 
+MIN_SPREAD: float = 1e-4
+"""Least spread of the initial walkers per unconstrained dimension, times ``max(1, |u|)``.
+
+On noise-free data the LM errors are ~0 and a tenth of them gave walkers that emcee
+refused as linearly dependent ("large condition number", a ratio above 1e8 between the
+ball's extent and its offset); 1e-4 keeps that ratio near 1e5."""
+
+
+def check_arguments(
+    model: AbstractModel,
+    *,
+    freeze: Freeze = None,
+    noise: str = "mixed",
+    n_walkers: int | None = None,
+    n_steps: int = 2000,
+    burn: int | None = None,
+    n_subsample: int = 10_000,
+) -> int:
+    """Check :func:`sample`'s settings before any work (the command line calls it before
+    its LM fit); returns the number of walkers.
+
+    Raises :class:`ParameterError` naming the argument: an unknown ``noise``, fewer than 2
+    steps, ``burn`` outside ``[0, n_steps)``, ``n_subsample < 1``, or fewer walkers than
+    twice the sampled dimension (emcee's stretch move needs that many).
+    """
+    if noise not in NOISE_MODELS:
+        raise ParameterError(f"noise={noise!r}: use one of {NOISE_MODELS}")
+
+    def is_int(x: object) -> bool:
+        return isinstance(x, int | np.integer) and not isinstance(x, bool)
+
+    if not is_int(n_steps) or n_steps < 2:
+        raise ParameterError(f"n_steps={n_steps!r}: use an integer >= 2 (default 2000)")
+    if burn is not None and (not is_int(burn) or not 0 <= burn < n_steps):
+        raise ParameterError(f"burn={burn!r}: use an integer in [0, n_steps={n_steps})")
+    if not is_int(n_subsample) or n_subsample < 1:
+        raise ParameterError(f"n_subsample={n_subsample!r}: use an integer >= 1")
+    n_free = Objective.build(
+        model,
+        metrics_mod.get_metric("low_e2"),
+        freeze_map(model, freeze, start_params(model, None)),
+    ).layout.size
+    k = 2 if noise == "mixed" else 1
+    ndim = n_free + k
+    if n_walkers is None:
+        return max(32, 4 * ndim)
+    if not is_int(n_walkers) or n_walkers < 2 * ndim:
+        raise ParameterError(
+            f"n_walkers={n_walkers!r}: emcee's stretch move needs at least twice the "
+            f"dimension, {2 * ndim} here ({n_free} free parameters and {k} noise "
+            f"scale{'s' if k > 1 else ''}); default max(32, 4 x dimension)"
+        )
+    return int(n_walkers)
+
+
 def _start_ball(layout: ParameterLayout, init: object, u0: np.ndarray, k: int) -> np.ndarray:
     """Per-dimension spread of the initial walkers in unconstrained units.
 
     A tenth of the LM standard errors mapped through the transforms when ``init`` is a
-    :class:`FitResult` with errors, else 1e-4; 1e-2 for the ``k`` log noise scales.
+    :class:`FitResult` with errors, else 1e-4; 1e-2 for the ``k`` log noise scales; at
+    least :data:`MIN_SPREAD` ``x max(1, |u0|)`` (a ball emcee accepts on noise-free data).
     """
     spread = np.full(u0.size, 1e-4)
     spread[-k:] = 1e-2
@@ -364,7 +420,7 @@ def _start_ball(layout: ParameterLayout, init: object, u0: np.ndarray, k: int) -
             sd = np.asarray(init.stderr[p.name], float).ravel() * np.abs(np.asarray(dudx))
             spread[i : i + p.size] = np.where(np.isfinite(sd) & (sd > 0), 0.1 * sd, 1e-4)
             i += p.size
-    return spread
+    return np.maximum(spread, MIN_SPREAD * np.maximum(1.0, np.abs(u0)))
 
 
 def sample(
@@ -402,8 +458,10 @@ def sample(
       autocorrelation times.
     """
     t0 = time.perf_counter()
-    if noise not in NOISE_MODELS:
-        raise ParameterError(f"noise={noise!r}: use one of {NOISE_MODELS}")
+    n_walkers = check_arguments(
+        model, freeze=freeze, noise=noise, n_walkers=n_walkers, n_steps=n_steps, burn=burn,
+        n_subsample=n_subsample,
+    )  # fmt: skip
     if isinstance(init, FitResult):
         metric = metric or init.metric
         start = start_params(model, init.params)
@@ -430,7 +488,6 @@ def sample(
         [np.asarray(layout.unconstrained(start)), np.log(np.maximum(sigma0, 1e-12))]
     )
     ndim = u0.size
-    n_walkers = n_walkers or max(32, 4 * ndim)
     spread = _start_ball(layout, init, u0, len(sigma_labels))
     p0 = u0 + spread * rng.standard_normal((n_walkers, ndim))
 
