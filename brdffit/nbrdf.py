@@ -35,7 +35,7 @@ from typing import Any
 import numpy as np
 from jaxtyping import ArrayLike, Float
 
-from brdffit.errors import MeasurementFileError, ParameterError
+from brdffit.errors import MeasurementFileError, MissingDependencyError, ParameterError
 from brdffit.geometry import io_to_halfdiff
 from brdffit.measurements import Measurements
 from brdffit.merl import MerlGrid, merl_grid, merl_grid_measurements, write_merl
@@ -265,8 +265,11 @@ def read_nbrdf(path: str | os.PathLike[str]) -> NBRDF:
 
     Raises :class:`MeasurementFileError` naming the file when a file is missing,
     unreadable or malformed, when the layers are not supported, or when the weights do
-    not match the architecture; ``ImportError`` naming ``pip install brdffit[nbrdf]``
-    when h5py is missing.
+    not match the architecture; :class:`~brdffit.errors.MissingDependencyError` (an
+    ``ImportError``) naming ``pip install brdffit[nbrdf]`` when h5py is missing.
+
+    This returns the network; :func:`read_nbrdf_measurements` returns the
+    :class:`Measurements` that :func:`brdffit.fit` takes.
     """
     p = Path(path)
     stem = p.with_suffix("") if p.suffix in (".json", ".h5") else p
@@ -276,6 +279,18 @@ def read_nbrdf(path: str | os.PathLike[str]) -> NBRDF:
     weights = _read_weights(h5_path, [s["name"] for s in layer_specs])
     layers = _build_layers(h5_path, layer_specs, weights)
     return NBRDF(name=stem.name, source=str(json_path), layers=layers, output=output)
+
+
+def read_nbrdf_measurements(
+    path: str | os.PathLike[str], *, stride: tuple[int, int, int] | int = (1, 1, 1)
+) -> Measurements:
+    """The NBRDF at ``path`` evaluated on the (strided) MERL grid, as :class:`Measurements`.
+
+    The reader of the format (README, Input files): ``read_nbrdf(path)`` then
+    :meth:`NBRDF.to_measurements`; ``path`` and errors as :func:`read_nbrdf`, ``stride``
+    as :func:`brdffit.merl.merl_grid`.
+    """
+    return read_nbrdf(path).to_measurements(stride=stride)
 
 
 def nbrdf_to_merl(path: str | os.PathLike[str], out_path: str | os.PathLike[str]) -> Measurements:
@@ -314,6 +329,8 @@ def _parse_architecture(json_path: Path) -> tuple[list[dict[str, Any]], str]:
     for i, layer in enumerate(raw_layers):
         kind = layer.get("class_name") if isinstance(layer, dict) else None
         cfg = layer.get("config", {}) if isinstance(layer, dict) else {}
+        if not isinstance(cfg, dict):
+            raise MeasurementFileError(json_path, f"layer {i} has a config that is not an object")
         if kind == "Dense" and output == "linear":
             dense.append(_dense_spec(json_path, i, cfg))
         elif kind == "Lambda" and i == len(raw_layers) - 1 and output == "linear":
@@ -331,7 +348,7 @@ def _parse_architecture(json_path: Path) -> tuple[list[dict[str, Any]], str]:
 
 def _dense_spec(json_path: Path, i: int, cfg: dict[str, Any]) -> dict[str, Any]:
     activation = cfg.get("activation", "linear")
-    if activation not in _ACTIVATIONS:
+    if not isinstance(activation, str) or activation not in _ACTIVATIONS:
         raise MeasurementFileError(
             json_path,
             f"layer {i} has activation {activation!r}; accepted: {sorted(_ACTIVATIONS)}",
@@ -342,12 +359,17 @@ def _dense_spec(json_path: Path, i: int, cfg: dict[str, Any]) -> dict[str, Any]:
             json_path, f"layer {i} has units={units!r}; expected an int >= 1"
         )
     shape = cfg.get("batch_input_shape")
+    n_in = shape[-1] if isinstance(shape, list) and shape else None
+    if n_in is not None and (not isinstance(n_in, int) or isinstance(n_in, bool)):
+        raise MeasurementFileError(
+            json_path, f"layer {i} has batch_input_shape {shape!r}; expected [null, 6]"
+        )
     return {
         "name": str(cfg.get("name", f"dense_{i + 1}")),
         "units": units,
         "activation": activation,
         "use_bias": bool(cfg.get("use_bias", True)),
-        "n_in": int(shape[-1]) if isinstance(shape, list) and shape else None,
+        "n_in": n_in,
     }
 
 
@@ -372,8 +394,9 @@ def _read_weights(h5_path: Path, names: list[str]) -> dict[str, dict[str, np.nda
     try:
         import h5py
     except ImportError:
-        raise ImportError(
-            "reading NBRDF files needs h5py; install it with: pip install brdffit[nbrdf]"
+        raise MissingDependencyError(
+            f"{h5_path}: reading NBRDF weights needs h5py; install it with: "
+            "pip install brdffit[nbrdf]"
         ) from None
     if not h5_path.is_file():
         raise MeasurementFileError(h5_path, "no such file (NBRDF weights)")
@@ -381,7 +404,10 @@ def _read_weights(h5_path: Path, names: list[str]) -> dict[str, dict[str, np.nda
         with h5py.File(h5_path, "r") as f:
             root = f["model_weights"] if "model_weights" in f else f
             return {name: _layer_weights(h5_path, root, name) for name in names}
-    except OSError as e:
+    except MeasurementFileError:
+        raise
+    except (OSError, KeyError, ValueError, TypeError, RuntimeError, AttributeError) as e:
+        # a damaged file fails anywhere inside h5py: all of them are "not readable"
         raise MeasurementFileError(h5_path, f"not a readable HDF5 weights file: {e}") from None
 
 
