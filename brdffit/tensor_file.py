@@ -8,6 +8,7 @@ imported (:mod:`brdffit.rgl` evaluates it).
 
 from __future__ import annotations
 
+import math
 import os
 import struct
 from dataclasses import dataclass
@@ -75,7 +76,7 @@ def rgl_header(path: str | os.PathLike[str]) -> RglFile:
                 if code not in _DTYPES:
                     raise MeasurementFileError(p, f"field {name!r} has unknown dtype code {code}")
                 dtype = np.dtype(_DTYPES[code])
-                if offset + dtype.itemsize * int(np.prod(shape)) > size:
+                if offset + dtype.itemsize * math.prod(shape) > size:  # Python ints: no overflow
                     raise MeasurementFileError(p, f"truncated: field {name!r} runs past the end")
                 fields[name] = (dtype, tuple(int(s) for s in shape), int(offset))
             description = _field(f, fields.get("description")).tobytes().decode("utf-8", "replace")
@@ -87,6 +88,11 @@ def rgl_header(path: str | os.PathLike[str]) -> RglFile:
         raise MeasurementFileError(
             p, f"missing field {', '.join(missing)}: not a file of Mitsuba's 'measured' format"
         )
+    for name, rank in (("phi_i", 1), ("theta_i", 1), (values[0], 2)):
+        if len(fields[name][1]) < rank:
+            raise MeasurementFileError(
+                p, f"field {name!r} has shape {fields[name][1]}; expected at least {rank} axes"
+            )
     return RglFile(
         path=str(p),
         description=description,
@@ -110,4 +116,4 @@ def _field(f, spec) -> np.ndarray:
         return np.zeros(0, np.uint8)
     dtype, shape, offset = spec
     f.seek(offset)
-    return np.fromfile(f, dtype=dtype, count=int(np.prod(shape))).reshape(shape)
+    return np.fromfile(f, dtype=dtype, count=math.prod(shape)).reshape(shape)
