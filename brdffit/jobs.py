@@ -1,4 +1,4 @@
-"""Resumable jobs in worker processes: the runner that sweeps and the stress benchmark share.
+"""Resumable jobs in worker processes, and the progress bar of every long command.
 
 A job's ``work`` writes its own result file atomically (:mod:`brdffit.atomic`) and
 returns a small status; a job whose file is finished is skipped by the caller before
@@ -12,6 +12,7 @@ from __future__ import annotations
 import concurrent.futures as cf
 import json
 import multiprocessing
+import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import TypeVar
@@ -73,3 +74,21 @@ def has_key(path: str | Path, key: str) -> bool:
     except (OSError, ValueError):
         return False
     return isinstance(d, dict) and key in d
+
+
+def progress_bar(total: int | None, desc: str, unit: str, enabled: bool = True):
+    """The tqdm bar of a long command on stderr (``sweep``, ``rank``, ``simplify``):
+    ``total`` steps of ``unit`` (``None``: count only); ``enabled=False`` shows nothing.
+    Write a finished step's line above it with :func:`progress_line`."""
+    from tqdm.auto import tqdm
+
+    return tqdm(
+        total=total, desc=desc, unit=unit, disable=not enabled, dynamic_ncols=True,
+        file=sys.stderr,
+    )  # fmt: skip
+
+
+def progress_line(bar, text: str) -> None:
+    """``text`` as one line on stderr above ``bar`` (nothing when the bar is disabled)."""
+    if not bar.disable:
+        bar.write(text, file=sys.stderr)

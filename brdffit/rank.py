@@ -24,6 +24,7 @@ between fits on different sub-grids.
 
 from __future__ import annotations
 
+import time
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -192,6 +193,44 @@ def _tied(a: float, b: float, rtol: float) -> bool:
     if np.isinf(a) or np.isinf(b):
         return bool(a == b)
     return bool(abs(b - a) <= rtol * max(abs(a), abs(b)))
+
+
+def fit_models(
+    models_: Sequence[object],
+    data: object,
+    metric: str,
+    *,
+    progress: bool = True,
+    **fit_kwargs: object,
+) -> list[FitResult]:
+    """Fit each model to ``data`` under ``metric`` (:func:`brdffit.fit`, ``throw=False``),
+    in order, for :func:`rank`.
+
+    ``progress``: a bar on stderr and, as each fit ends, a line ``rank: <label>  <s> s
+    <metric> <loss> (<status>)``. ``fit_kwargs`` go to :func:`brdffit.fit`.
+    """
+    from brdffit.fit import fit
+    from brdffit.jobs import progress_bar, progress_line
+    from brdffit.models import label
+
+    bar = progress_bar(len(models_), "rank", "fit", progress)
+    out = []
+    try:
+        for m in models_:
+            bar.set_postfix_str(label(m), refresh=True)
+            t0 = time.perf_counter()
+            r = fit(m, data, metric, throw=False, **fit_kwargs)
+            state = "converged" if r.converged else r.status.name
+            progress_line(
+                bar,
+                f"rank: {label(m)}  {time.perf_counter() - t0:.1f} s  {r.metric} "
+                f"{r.loss:.6g} ({state})",
+            )
+            bar.update(1)
+            out.append(r)
+    finally:
+        bar.close()
+    return out
 
 
 def rank(results: Sequence[FitResult], *, by: str = "loss") -> Ranking:

@@ -122,6 +122,7 @@ from brdffit.abstract_model import AbstractModel
 from brdffit.errors import ParameterError
 from brdffit.fit import fit
 from brdffit.folds import MIN_GAIN, deal_blocks, feature_test, fold_t, keep_threshold
+from brdffit.jobs import progress_bar, progress_line
 from brdffit.measurements import Measurements
 from brdffit.objective import Objective
 from brdffit.reduction import PathRow, Reduction
@@ -164,6 +165,7 @@ def simplify(
     seed: int = 0,
     min_gain: float = MIN_GAIN,
     full: FitResult | None = None,
+    progress: bool = False,
     **fit_kwargs,
 ) -> Reduction:
     """Greedy backward search for the simplest variant of ``model`` the data support.
@@ -183,6 +185,8 @@ def simplify(
       must be shown to exceed to stay (:data:`~brdffit.folds.MIN_GAIN`, 1%; 0: any).
     - ``full``: the start model's fit to ``data`` under ``metric`` and ``cut_deg``
       when one is at hand (a sweep's); ``None`` fits it.
+    - ``progress``: a bar on stderr and a line per fitted variant (step, change, free
+      scalars, loss, criterion, seconds), as each ends.
     - ``fit_kwargs``: passed to :func:`brdffit.fit` for the start model's fit and
       the chosen one's; ``freeze``, ``robust`` and the tolerances also hold in the search.
 
@@ -217,8 +221,19 @@ def simplify(
             f"{m.name}, cut {cut_deg}"
         )
     s = _Search(m, prep, jnp.asarray(train), criterion, n_se, min_gain, full, fit_kwargs)
-    start = {k: np.broadcast_to(v, (len(train),) + np.shape(v)) for k, v in full.params.items()}
-    node = s.solve(model, start)
+    s.bar = progress_bar(None, "simplify", "fit", progress)
+    try:
+        return _search(s, model, data, metric, full, prep, cut_deg, seed, fit_kwargs)
+    finally:
+        s.bar.close()
+
+
+def _search(s, model, data, metric, full, prep, cut_deg, seed, fit_kwargs) -> Reduction:
+    """The greedy search of :func:`simplify` on the prepared ``_Search`` ``s``."""
+    m, k_folds = s.m, s.train.shape[0] - 1
+    start = {k: np.broadcast_to(v, (s.train.shape[0],) + np.shape(v))
+             for k, v in full.params.items()}  # fmt: skip
+    node = s.solve(model, start, step=0, change="start")
     path = [PathRow(0, models.label(model), "-", node.n_free, node.loss, node.value,
                     math.nan, math.nan, "start")]  # fmt: skip
     best, step = node, 0
@@ -239,9 +254,9 @@ def simplify(
         kw["freeze"] = s.freeze_names(node.model)
         result = fit(node.model, data, metric, cut_deg=cut_deg, seed=seed, **kw)
     ratio = _eval_time(node.model, result.params, prep) / _eval_time(model, full.params, prep)
-    gain = min_gain if k_folds else math.nan
-    return Reduction(tuple(path), chosen, result, full, ratio, criterion, k_folds, float(n_se),
-                     gain, m.name, data.source)  # fmt: skip
+    gain = s.min_gain if k_folds else math.nan
+    return Reduction(tuple(path), chosen, result, full, ratio, s.criterion, k_folds,
+                     float(s.n_se), gain, m.name, data.source)  # fmt: skip
 
 
 class _Search:
@@ -251,6 +266,7 @@ class _Search:
         self.m, self.prep, self.train, self.criterion, self.n_se = m, prep, train, criterion, n_se
         self.min_gain = min_gain
         self.done: dict[str, _Node] = {}  # label -> fit: a variant reached twice is fitted once
+        self.bar = progress_bar(None, "simplify", "fit", False)  # simplify() sets the shown one
         self.frozen = set(full.frozen)
         self.robust, self.scale = full.robust, full.robust_scale or 1.0
         defaults = lm.Tolerances()
@@ -261,12 +277,25 @@ class _Search:
         names = [p.name for p in model.parameters if p.name in self.frozen]
         return names or None
 
-    def solve(self, model: AbstractModel, rows: dict[str, np.ndarray]) -> _Node:
-        """Fit ``model`` on every row (all data, then each fold's training cells)."""
+    def solve(
+        self, model: AbstractModel, rows: dict[str, np.ndarray], step: int = 0, change: str = ""
+    ) -> _Node:
+        """Fit ``model`` on every row (all data, then each fold's training cells); a
+        progress line names the search ``step`` and the ``change`` from the parent."""
         key = models.label(model)
-        if key not in self.done:
+        t0, again = time.perf_counter(), key in self.done
+        if not again:
             self.done[key] = self._solve(model, rows)
-        return self.done[key]
+        node = self.done[key]
+        crit = "BIC" if self.criterion == "bic" else f"held-out {self.m.name}"
+        when = "fitted before" if again else f"{time.perf_counter() - t0:.1f} s"
+        progress_line(
+            self.bar,
+            f"simplify: step {step}  {change or key}  k={node.n_free}  {self.m.name} "
+            f"{node.loss:.6g}  {crit} {node.value:.6g}  ({when})",
+        )
+        self.bar.update(1)
+        return node
 
     def _solve(self, model: AbstractModel, rows: dict[str, np.ndarray]) -> _Node:
         freeze = {n: rows[n][0] for n in self.freeze_names(model) or ()}
@@ -295,7 +324,7 @@ class _Search:
         """Fit and score every move from ``node`` and, when several pass, their joint
         move (module docstring): the step's path rows, the variant taken (``None``: none
         passed, the search ends) and the lowest held-out loss fitted so far."""
-        tried = [(self.solve(m, r), ch) for m, r, ch, _ in self.moves(node)]
+        tried = [(self.solve(m, r, step, ch), ch) for m, r, ch, _ in self.moves(node)]
         best = min([best, *(c for c, _ in tried if c.ok)], key=lambda c: c.value)
         scored = [(c, ch, *self.accept(c, node, best)) for c, ch in tried]
         passed = sorted((t for t in scored if t[0].ok and t[2]), key=self._rank)
@@ -303,7 +332,7 @@ class _Search:
             changes = [t[1] for t in passed]
             joint = joint_move(node.model, node.rows, changes, self.frozen, self._start_cost)
             if joint is not None:
-                j = self.solve(joint[0], joint[1])
+                j = self.solve(joint[0], joint[1], step, joint[2])
                 best = min(best, j, key=lambda c: c.value) if j.ok else best
                 scored.append((j, joint[2], *self.accept(j, node, best)))
                 if j.ok and scored[-1][2]:
