@@ -64,12 +64,15 @@ class Record:
 
 @dataclass(frozen=True)
 class SweepResults:
-    """A sweep folder read back: manifest, results (sorted), and recorded errors."""
+    """A sweep folder read back: manifest, results (sorted), recorded errors, and the
+    result files that could not be read (``unreadable``: (path relative to the folder,
+    why) pairs; the report lists them and goes on without them)."""
 
     manifest: dict
     records: tuple[Record, ...]
     errors: tuple[dict, ...]
     families: dict = field(default_factory=dict)
+    unreadable: tuple[tuple[str, str], ...] = ()
 
     @property
     def materials(self) -> list[str]:
@@ -118,6 +121,9 @@ def load_sweep(
     """Read ``sweep.json`` and every ``<material>/<label>__<metric>[.error].json``.
 
     ``families``: material -> family, replacing the recorded ones for those materials.
+    A result file that does not parse or lacks a field (truncated, foreign) is skipped
+    and listed in ``unreadable``. Raises :class:`SweepError` when ``sweep.json`` is
+    missing or is not a sweep manifest.
     """
     families = dict(families or {})
     root = Path(sweep_dir)
@@ -125,32 +131,58 @@ def load_sweep(
         manifest = json.loads((root / "sweep.json").read_text())
     except (OSError, ValueError) as e:
         raise SweepError(f"{root}: not a sweep folder (sweep.json: {e})") from e
-    records, errors = [], []
-    for p in sorted(root.glob("*/*.json")):
-        d = json.loads(p.read_text())
-        if p.name.endswith(".error.json"):
-            errors.append(d)
-            continue
-        records.append(
-            Record(
-                material=d["material"],
-                family=_record_family(d, families),
-                model=d.get("label") or d["model"],
-                metric=d["metric"],
-                loss=_num(d["loss"]),
-                losses={k: _num(v) for k, v in d.get("losses", {}).items()},
-                aic=_num(d.get("aic")),
-                bic=_num(d.get("bic")),
-                n_free=int(d.get("n_free", 0)),
-                converged=bool(d.get("converged", False)),
-                status=str(d.get("status", "")),
-                wall_time=_num(d.get("wall_time")),
-                eval_ns=_num(d.get("eval_ns_per_sample")),
-                provenance=provenance_label(d.get("provenance")),
-                loss_per_sample=per_sample(d["metric"], _num(d["loss"]), d.get("n_samples", 0)),
-            )
+    if not (
+        isinstance(manifest, dict)
+        and isinstance(manifest.get("materials"), dict)
+        and isinstance(manifest.get("settings"), dict)
+        and all(isinstance(manifest.get(k), dict | list) for k in ("models", "metrics"))
+    ):
+        raise SweepError(
+            f"{root / 'sweep.json'}: not a sweep manifest (expected an object with "
+            "materials, models, metrics and settings)"
         )
-    return SweepResults(manifest, tuple(records), tuple(errors), families)
+    records, errors, unreadable = [], [], []
+    for p in sorted(root.glob("*/*.json")):
+        try:
+            d = json.loads(p.read_text())
+            if not isinstance(d, dict):
+                raise TypeError(f"a JSON {type(d).__name__}, not an object")
+            if p.name.endswith(".error.json"):
+                missing = [k for k in ("material", "model", "metric", "error") if k not in d]
+                if missing:
+                    raise KeyError(", ".join(missing))
+                errors.append(d)
+            else:
+                records.append(_record(d, families))
+        except (OSError, ValueError, KeyError, TypeError, AttributeError) as e:
+            why = f"missing field {e}" if isinstance(e, KeyError) else str(e) or type(e).__name__
+            unreadable.append((str(p.relative_to(root)), " ".join(why.split())))
+    return SweepResults(manifest, tuple(records), tuple(errors), families, tuple(unreadable))
+
+
+def _record(d: dict, families: dict[str, str]) -> Record:
+    """The :class:`Record` of a result file's JSON object (``KeyError`` for a missing
+    field, ``ValueError``/``TypeError`` for a value of the wrong kind)."""
+    for key in ("material", "metric"):
+        if not isinstance(d[key], str):
+            raise TypeError(f"field {key!r} is {d[key]!r}, not a string")
+    return Record(
+        material=d["material"],
+        family=_record_family(d, families),
+        model=str(d.get("label") or d["model"]),
+        metric=d["metric"],
+        loss=_num(d["loss"]),
+        losses={k: _num(v) for k, v in d.get("losses", {}).items()},
+        aic=_num(d.get("aic")),
+        bic=_num(d.get("bic")),
+        n_free=int(d.get("n_free", 0)),
+        converged=bool(d.get("converged", False)),
+        status=str(d.get("status", "")),
+        wall_time=_num(d.get("wall_time")),
+        eval_ns=_num(d.get("eval_ns_per_sample")),
+        provenance=provenance_label(d.get("provenance")),
+        loss_per_sample=per_sample(d["metric"], _num(d["loss"]), d.get("n_samples", 0)),
+    )
 
 
 @dataclass(frozen=True)

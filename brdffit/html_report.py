@@ -277,6 +277,7 @@ def _sweep_header(res: SweepResults) -> list[str]:
         f"MERL grid stride {tuple(s.get('stride', ()))}, angle cut {s.get('cut_deg')} deg",
         f"results: {len(res.records)} of {total} tasks, {unconv} not converged, "
         f"{len(res.errors)} errors",
+        *(f"unreadable, left out: {path} ({why})" for path, why in res.unreadable),
     ]
     provenance = Counter(r.provenance for r in res.records)
     items += [f"computed by: {p} ({n} results)" for p, n in sorted(provenance.items())]

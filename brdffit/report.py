@@ -55,7 +55,12 @@ def _header(res) -> list[str]:
         f"- MERL grid stride {tuple(s['stride'])}, angle cut {cut}, "
         f"{s['n_restarts']} random restarts and a screen of {s.get('screen', 0)} candidates "
         f"(seed {s['seed']}), at most {s['max_steps']} LM steps",
-        f"- results: {done} of {total} tasks, {unconv} not converged, {len(res.errors)} errors",
+        f"- results: {done} of {total} tasks, {unconv} not converged, {len(res.errors)} errors"
+        + (
+            f", {len(res.unreadable)} unreadable files (listed at the end)"
+            if res.unreadable
+            else ""
+        ),
         *_provenance(res),
         "",
         "Ranks are by the metric value per material. A fit that did not converge is ranked "
@@ -95,6 +100,15 @@ def _errors(res) -> list[str]:
     for e in res.errors:
         msg = " ".join(str(e.get("message", "")).split())[:200].replace("|", "/")
         lines.append(f"| {e['material']} | {e['model']} | {e['metric']} | {e['error']}: {msg} |")
+    return lines + [""]
+
+
+def _unreadable(res) -> list[str]:
+    """The result files the report left out, each with why (:func:`load_sweep`)."""
+    if not res.unreadable:
+        return []
+    lines = ["## Unreadable result files (left out of this report)", ""]
+    lines += [f"- `{path}`: {why}" for path, why in res.unreadable]
     return lines + [""]
 
 
@@ -167,6 +181,7 @@ def write_report(
     if survivors:
         lines += ["## Model reduction (sweep --simplify)", "", survivors, ""]
     lines += _errors(res)
+    lines += _unreadable(res)
     path = out / "report.md"
     write_text(path, "\n".join(lines).rstrip() + "\n")
     return path

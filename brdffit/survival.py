@@ -88,9 +88,9 @@ def load_survival(sweep_dir: str | os.PathLike[str]) -> list[Survival]:
             continue
         try:
             d = json.loads(p.read_text())
-        except ValueError:
-            continue
-        red = d.get("simplify")
+        except (OSError, ValueError):
+            continue  # listed by the report as unreadable (crossrank.load_sweep)
+        red = d.get("simplify") if isinstance(d, dict) else None
         if not isinstance(red, dict):
             continue
         start = red.get("start") or d.get("label") or d.get("model", "?")
