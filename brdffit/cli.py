@@ -10,16 +10,21 @@ check fails. Models are given as specs, ``name`` or ``name[k=v,...]``
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from collections.abc import Sequence
 
-from brdffit.errors import BrdffitError
+from brdffit.errors import BrdffitError, ParameterError
 
 MODELS_HELP = (
     "comma-separated model specs: name or name[k=v,...] for a variant with static options, "
     "e.g. walter,lafortune[n_lobes=2] (quote it in the shell)"
 )
 
+
+SEED_HELP = "seed of the random starts and subsamples (default 0): same seed, same answer"
+NO_PROGRESS_HELP = "no progress bar or progress lines on stderr"
+FMT_HELP = "table format (default text)"
 
 FAMILIES_HELP = (
     "CSV file of material,family rows; replaces the family guessed from the material name "
@@ -51,6 +56,7 @@ def _specs(text: str) -> list[str]:
 
 
 def _freeze(items: Sequence[str] | None):
+    """``--freeze`` items as :func:`brdffit.fit`'s ``freeze``: names, or name -> value(s)."""
     if not items:
         return None
     out: dict[str, object] = {}
@@ -58,18 +64,50 @@ def _freeze(items: Sequence[str] | None):
     for item in items:
         key, sep, value = item.partition("=")
         if sep:
-            out[key] = [float(v) for v in value.split(",")] if "," in value else float(value)
+            try:
+                numbers = [float(v) for v in value.split(",")]
+            except ValueError:
+                raise ParameterError(
+                    f"--freeze {item!r}: {value!r} is not a number; give NAME, NAME=VALUE "
+                    "or NAME=R,G,B"
+                ) from None
+            out[key] = numbers if "," in value else numbers[0]
         else:
             names.append(key)
     if names and out:
-        raise BrdffitError("--freeze: give either NAME or NAME=VALUE for every parameter")
+        raise ParameterError("--freeze: give either NAME or NAME=VALUE for every parameter")
     return out or names
 
 
+def _check_output(option: str, path: str | None) -> None:
+    """Refuse, before any fit, an output path that cannot be written: a folder, or a file
+    in a folder that does not exist or is not writable (``option`` names it)."""
+    if path is None:
+        return
+    from pathlib import Path
+
+    p = Path(path)
+    folder = p.parent if str(p.parent) else Path(".")
+    if p.is_dir():
+        raise ParameterError(f"{option} {path}: is a folder; give a file path")
+    if not folder.is_dir():
+        raise ParameterError(
+            f"{option} {path}: folder {folder} does not exist; give a path in an existing folder"
+        )
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise ParameterError(f"{option} {path}: folder {folder} is not writable")
+
+
 def _load(args):
+    """The measurements of ``args.file``; a strided MERL grid says its stride in ``source``
+    (the first line of every report names it)."""
     from brdffit.loading import load_measurements
 
-    return load_measurements(args.file, stride=tuple(args.stride))
+    data = load_measurements(args.file, stride=tuple(args.stride))
+    stride = tuple(args.stride)
+    if stride != (1, 1, 1):
+        data = data.replace(source=f"{data.source}, MERL grid at stride {stride}")
+    return data
 
 
 def _write(path: str, text: str) -> None:
@@ -93,6 +131,11 @@ def cmd_info(args) -> None:
 def cmd_fit(args) -> None:
     from brdffit.fit import fit
 
+    for option, path in (("--json", args.json), ("--report", args.report)):
+        _check_output(option, path)
+    if args.export and args.export_prefix:
+        _check_output("--export-prefix", args.export_prefix)
+    freeze = _freeze(args.freeze)
     model, data = _model(args.model, args.option), _load(args)
     if args.export:  # refuse a target that cannot take the model before fitting
         from brdffit.export import check_targets
@@ -102,7 +145,7 @@ def cmd_fit(args) -> None:
         model,
         data,
         args.metric,
-        freeze=_freeze(args.freeze),
+        freeze=freeze,
         cut_deg=args.cut,
         n_restarts=args.restarts,
         screen=args.screen,
@@ -142,11 +185,26 @@ def cmd_sample(args) -> None:
     import warnings
 
     from brdffit.fit import fit
-    from brdffit.sample import sample
+    from brdffit.sample import check_arguments, sample
 
-    model, data = _model(args.model, args.option), _load(args)
+    for option, path in (("--json", args.json), ("--corner", args.corner)):
+        _check_output(option, path)
+    freeze = _freeze(args.freeze)
+    model = _model(args.model, args.option)
+    try:  # before the LM fit: a setting the sampler refuses must not cost a fit
+        check_arguments(
+            model, freeze=freeze, noise=args.noise, n_walkers=args.walkers,
+            n_steps=args.steps, n_subsample=args.subsample,
+        )  # fmt: skip
+    except ParameterError as e:
+        names = {"n_walkers": "--walkers", "n_steps": "--steps", "n_subsample": "--subsample"}
+        text = str(e)
+        for name, option in names.items():
+            text = text.replace(f"{name}=", f"{option} ", 1) if text.startswith(name) else text
+        raise ParameterError(text) from None
+    data = _load(args)
     _say(f"fitting {model.name} to {data.source} by Levenberg-Marquardt ({args.metric}) ...")
-    r = fit(model, data, args.metric, freeze=_freeze(args.freeze), cut_deg=args.cut, throw=False)
+    r = fit(model, data, args.metric, freeze=freeze, cut_deg=args.cut, throw=False)
     print(r.report(), end="\n\n", flush=True)
     _say(f"sampling the posterior with emcee ({args.steps} steps, noise {args.noise}) ...")
     with warnings.catch_warnings(record=True) as caught:
@@ -155,7 +213,7 @@ def cmd_sample(args) -> None:
             model,
             data,
             init=r,
-            freeze=_freeze(args.freeze),
+            freeze=freeze,
             noise=args.noise,
             n_steps=args.steps,
             n_walkers=args.walkers,
@@ -179,14 +237,14 @@ def cmd_sample(args) -> None:
 
 
 def cmd_rank(args) -> None:
-    from brdffit.fit import fit
-    from brdffit.rank import rank
+    from brdffit.rank import fit_models, rank
 
-    data = _load(args)
     models_ = [_model(n, ()) for n in _specs(args.models)]  # validate every spec before fitting
-    results = [
-        fit(m, data, args.metric, cut_deg=args.cut, seed=args.seed, throw=False) for m in models_
-    ]
+    data = _load(args)
+    results = fit_models(
+        models_, data, args.metric, cut_deg=args.cut, seed=args.seed,
+        progress=not args.no_progress,
+    )  # fmt: skip
     print(rank(results, by=args.by).table(args.format))
 
 
@@ -232,9 +290,14 @@ def cmd_sweep(args) -> None:
 
 
 def cmd_report(args) -> None:
+    from brdffit.crossrank import load_sweep
     from brdffit.html_report import write_sweep_html
     from brdffit.report import write_report
 
+    skipped = load_sweep(args.sweep_dir).unreadable
+    if skipped:
+        names = ", ".join(f"{path} ({why})" for path, why in skipped)
+        _say(f"brdffit report: {len(skipped)} unreadable result files left out: {names}")
     md = write_report(args.sweep_dir, families=args.families)
     print(write_sweep_html(args.sweep_dir, families=args.families))
     print(md)
@@ -265,6 +328,8 @@ def cmd_simplify(args) -> None:
     """The reduction path table and the chosen label (:func:`brdffit.simplify.simplify`)."""
     from brdffit.simplify import simplify
 
+    _check_output("--json", args.json)
+    freeze = _freeze(args.freeze)
     r = simplify(
         _model(args.model, args.option),
         _load(args),
@@ -275,7 +340,8 @@ def cmd_simplify(args) -> None:
         min_gain=args.min_gain,
         cut_deg=args.cut,
         seed=args.seed,
-        freeze=_freeze(args.freeze),
+        freeze=freeze,
+        progress=not args.no_progress,
         throw=False,
     )
     print(r.table(args.format))
@@ -296,9 +362,13 @@ def _stride_arg(sp: argparse.ArgumentParser) -> None:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from brdffit import __version__
     from brdffit.metrics import METRICS
 
     p = _Parser(prog="brdffit", description="Fit analytic BRDF models to measured reflectance.")
+    p.add_argument(
+        "--version", action="version", version=f"brdffit {__version__ or 'unknown (not installed)'}"
+    )
     sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
 
     def data_args(sp):
@@ -320,10 +390,21 @@ def build_parser() -> argparse.ArgumentParser:
                 metavar="KEY=VALUE",
                 help="static model option, repeatable",
             )
-            sp.add_argument("--freeze", action="append", metavar="NAME[=VALUE]")
-        sp.add_argument("--metric", default="low_e2", choices=sorted(METRICS))
+            sp.add_argument(
+                "--freeze",
+                action="append",
+                metavar="NAME[=VALUE]",
+                help="hold a parameter out of the fit, at its start value or at VALUE "
+                "(R,G,B for a colour); repeatable",
+            )
+        sp.add_argument(
+            "--metric",
+            default="low_e2",
+            choices=sorted(METRICS),
+            help="fitting metric (default low_e2; see README, Fitting metrics)",
+        )
         sp.add_argument("--cut", type=float, default=80.0, help="zenith cut, degrees")
-        sp.add_argument("--seed", type=int, default=0)
+        sp.add_argument("--seed", type=int, default=0, help=SEED_HELP)
 
     s = sub.add_parser("models", help="list every model with parameters and options")
     s.set_defaults(func=cmd_models)
@@ -375,19 +456,34 @@ def build_parser() -> argparse.ArgumentParser:
         choices=["mixed", "multiplicative", "additive", "constant"],
         help="likelihood's noise model (default mixed: an absolute plus a relative scale)",
     )
-    s.add_argument("--steps", type=int, default=2000)
-    s.add_argument("--walkers", type=int, default=None)
-    s.add_argument("--subsample", type=int, default=10_000)
-    s.add_argument("--corner", metavar="PNG")
-    s.add_argument("--json", metavar="OUT")
-    s.add_argument("--no-progress", action="store_true")
+    s.add_argument(
+        "--steps", type=int, default=2000, help="steps per walker (>= 2; a third is burn-in)"
+    )
+    s.add_argument(
+        "--walkers",
+        type=int,
+        default=None,
+        help="emcee walkers (>= 2 x sampled dimension; default max(32, 4 x dimension))",
+    )
+    s.add_argument(
+        "--subsample",
+        type=int,
+        default=10_000,
+        help="samples drawn at random for the likelihood (default 10000)",
+    )
+    s.add_argument("--corner", metavar="PNG", help="write a corner plot of the posterior")
+    s.add_argument("--json", metavar="OUT", help="write the posterior summary as JSON")
+    s.add_argument("--no-progress", action="store_true", help=NO_PROGRESS_HELP)
     s.set_defaults(func=cmd_sample)
     s = sub.add_parser("rank", help="fit several models and rank them")
     data_args(s)
     fit_args(s, with_model=False)
     s.add_argument("--models", required=True, help=MODELS_HELP)
-    s.add_argument("--by", default="loss", choices=["loss", "aic", "bic"])
-    s.add_argument("--format", default="text", choices=["text", "markdown", "csv"])
+    s.add_argument(
+        "--by", default="loss", choices=["loss", "aic", "bic"], help="rank by (default loss)"
+    )
+    s.add_argument("--format", default="text", choices=["text", "markdown", "csv"], help=FMT_HELP)
+    s.add_argument("--no-progress", action="store_true", help=NO_PROGRESS_HELP)
     s.set_defaults(func=cmd_rank)
     s = sub.add_parser("sweep", help="fit materials x models x metrics, resumable")
     s.add_argument("out", help="sweep folder (created; an existing one is resumed)")
@@ -411,7 +507,7 @@ def build_parser() -> argparse.ArgumentParser:
         default=32,
         help="candidates spread over the ranges; the cheapest 8 become starts (0: none)",
     )
-    s.add_argument("--seed", type=int, default=0)
+    s.add_argument("--seed", type=int, default=0, help=SEED_HELP)
     s.add_argument(
         "--jobs",
         type=int,
@@ -439,23 +535,28 @@ def build_parser() -> argparse.ArgumentParser:
         help="after each fit, leave out the features the data do not support (criterion, "
         "default cv); stored in each result file",
     )
-    s.add_argument("--no-progress", action="store_true")
+    s.add_argument("--no-progress", action="store_true", help=NO_PROGRESS_HELP)
     s.add_argument("--families", metavar="CSV", help=FAMILIES_HELP)
     s.set_defaults(func=cmd_sweep)
     s = sub.add_parser("report", help="Markdown and one-file HTML report of a sweep folder")
-    s.add_argument("sweep_dir")
+    s.add_argument("sweep_dir", help="a folder written by brdffit sweep")
     s.add_argument("--families", metavar="CSV", help=FAMILIES_HELP)
     s.set_defaults(func=cmd_report)
     s = sub.add_parser("check", help="values and gradients at extreme directions and bounds")
     s.add_argument(
         "models", nargs="*", metavar="MODEL", help="model names or name[k=v,...] (default: all)"
     )
-    s.add_argument("--dtype", default="both", choices=["float32", "float64", "both"])
-    s.add_argument("--format", default="text", choices=["text", "markdown", "csv"])
+    s.add_argument(
+        "--dtype",
+        default="both",
+        choices=["float32", "float64", "both"],
+        help="precision of the checks (default both)",
+    )
+    s.add_argument("--format", default="text", choices=["text", "markdown", "csv"], help=FMT_HELP)
     s.set_defaults(func=cmd_check)
     s = sub.add_parser("demo", help="synthetic material -> fits -> ranking -> posterior")
     s.add_argument("--out", default="demo-out", help="output folder")
-    s.add_argument("--no-progress", action="store_true")
+    s.add_argument("--no-progress", action="store_true", help=NO_PROGRESS_HELP)
     s.set_defaults(func=cmd_demo)
     s = sub.add_parser("simplify", help="leave out the features the data do not support")
     data_args(s)
@@ -482,7 +583,8 @@ def build_parser() -> argparse.ArgumentParser:
         help="cv: a feature stays only when it lowers the held-out loss by more than this "
         "fraction (default 0.01)",
     )
-    s.add_argument("--format", default="text", choices=["text", "markdown"])
+    s.add_argument("--format", default="text", choices=["text", "markdown"], help=FMT_HELP)
+    s.add_argument("--no-progress", action="store_true", help=NO_PROGRESS_HELP)
     s.add_argument("--json", metavar="OUT", help="write the path and both fits as JSON")
     s.set_defaults(func=cmd_simplify)
     return p
