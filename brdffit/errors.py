@@ -69,3 +69,16 @@ class SweepError(BrdffitError, ValueError):
 
 class MissingDependencyError(BrdffitError, ImportError):
     """An optional dependency is not installed; the message names the extra to install."""
+
+
+class ExportError(BrdffitError, ValueError):
+    """An export target is unknown, or has no clean mapping for the model; says which."""
+
+
+class ExportValueError(ExportError):
+    """A value to export is not finite or not writable; ``parameter`` names it."""
+
+    def __init__(self, parameter: str, value: object, message: str) -> None:
+        self.parameter = parameter
+        self.value = value
+        super().__init__(message)

@@ -35,8 +35,8 @@ import numpy as np
 
 from brdffit import models
 from brdffit.atomic import write_text
-from brdffit.errors import BrdffitError
-from brdffit.export import gltf, materialx, mitsuba
+from brdffit.errors import ExportError, ExportValueError
+from brdffit.export import _numbers, gltf, materialx, mitsuba
 from brdffit.export._match import (
     ERROR_DEFINITION,
     EXACT_TOL,
@@ -54,16 +54,14 @@ TARGETS: dict[str, types.ModuleType] = {"mitsuba": mitsuba, "gltf": gltf, "mater
 """Target name -> module with ``candidates(model, params)`` and ``finish(...)``."""
 
 
-class ExportError(BrdffitError, ValueError):
-    """An export target is unknown, or has no clean mapping for the model; says which."""
-
-
 @dataclass(frozen=True, eq=False)
 class Export:
     """A fitted material written for one renderer, and how faithful it is.
 
     Fields: ``target`` (``"mitsuba"``, ``"gltf"``, ``"materialx"``); ``model`` (the
-    fitted model's label); ``target_model`` (what was written, e.g. ``"principled"``);
+    fitted model's label); ``target_model`` (exactly what was written: the Mitsuba BSDF tree,
+    ``"blendbsdf(diffuse, roughconductor[distribution=ggx])"``, the glTF material and its
+    extensions, the OpenPBR surface);
     ``exact`` (measured error <= ``EXACT_TOL``); ``error`` (relative RMS of ``f cos_i``)
     and ``log_error`` (RMS of ``ln(1 + f cos_i)`` differences), :data:`ERROR_DEFINITION`;
     ``fitted`` (the target's parameters were fitted by least
@@ -140,50 +138,103 @@ def default_prefix(input_path: str | Path, json_path: str | Path | None, label: 
     return Path(f"{Path(input_path).stem}.{safe}")
 
 
-def _model_and_values(result: FitResult, wi: np.ndarray, wo: np.ndarray):
+@dataclass(frozen=True, eq=False)
+class _Prepared:
+    """A fit made ready for every target: the base model, its full RGB parameters and
+    its values ``f_model`` (N, 3, 1/sr) at the error directions ``wi``, ``wo``."""
+
+    result: FitResult
+    base: object
+    params: dict[str, np.ndarray]
+    f_model: np.ndarray
+    wi: np.ndarray
+    wo: np.ndarray
+
+
+def _prepare(result: FitResult) -> _Prepared:
+    """Evaluate the fitted model once at :func:`error_directions` (shared by all targets).
+
+    Raises :class:`~brdffit.errors.ExportValueError` naming a non-finite parameter, or
+    saying that the model's values are not finite at the fitted parameters.
+    """
+    _numbers.require_finite("the fit's parameter", result.params)
+    wi, wo = error_directions()
     model = models.get(result.model, **dict(result.options))
     params = {k: np.asarray(v, float) for k, v in result.params.items()}
     f = np.asarray(model.eval(params, wi, wo), float)
+    bad = ~np.isfinite(f)
+    if bad.any():
+        raise ExportValueError(
+            "f",
+            float(f[bad][0]),
+            f"{models.label(result.model, result.options)} is not finite at the fitted "
+            f"parameters ({int(bad.any(axis=1).sum())} of {len(f)} direction pairs, e.g. "
+            f"{float(f[bad][0])}); a renderer cannot be given a material that the model "
+            "itself cannot evaluate",
+        )
     if isinstance(model, Restricted):
         params = model.expand({k: jnp.asarray(v) for k, v in params.items()})
-    return base_of(model), {k: np.array(v, float) for k, v in params.items()}, f
+    params = {k: np.array(v, float) for k, v in params.items()}
+    return _Prepared(result, base_of(model), params, f, wi, wo)
 
 
-def export(result: FitResult, target: str) -> Export:
-    """Map the fitted material of ``result`` to ``target`` and measure the error.
+def _choose(module: types.ModuleType, prep: _Prepared, fit: bool) -> tuple[Match, list[str]]:
+    """The candidate with an exact start, else the one with the least log error after
+    least squares (``fit``) or as mapped; and one note listing every candidate's errors."""
+    starts = module.candidates(prep.base, prep.params)
+    args = (prep.f_model, prep.wi, prep.wo)
+    first = [match(fam, start, *args, fit=False) for fam, start in starts]
+    exact = [m for m in first if m.exact]
+    tried = exact[:1] or ([match(*s, *args) for s in starts] if fit else first)
+    chosen = best(tried)
+    if len(tried) > 1:
+        text = "; ".join(f"{m.family.name} {m.error:.3g} / {m.log_error:.3g}" for m in tried)
+        return chosen, [f"candidates (error / log error): {text}; kept the least log error"]
+    return chosen, []
 
-    Tries the target's candidate materials for the model (closed-form starts, kept when
-    exact, else fitted by least squares) and keeps an exact one, else the smallest log error.
-    Raises :class:`ExportError` for an unknown target, a model the target has no clean
-    mapping for (MaterialX) or a result with non-finite parameters.
-    """
-    (name,) = parse_targets(target)
+
+def _export(prep: _Prepared, name: str, fit: bool = True) -> Export:
     module = TARGETS[name]
-    bad = [k for k, v in result.params.items() if not np.all(np.isfinite(v))]
-    if bad:
-        raise ExportError(f"export {name}: the fit's parameters {bad} are not finite")
-    wi, wo = error_directions()
-    base, params, f_model = _model_and_values(result, wi, wo)
-    reason = getattr(module, "unsupported", lambda m: None)(base)
+    reason = getattr(module, "unsupported", lambda m: None)(prep.base)
     if reason:
         raise ExportError(f"export {name}: {reason}")
-    starts = module.candidates(base, params)
-    first = [match(fam, start, f_model, wi, wo, fit=False) for fam, start in starts]
-    exact = [m for m in first if m.exact]
-    chosen: Match = exact[0] if exact else best([match(*s, f_model, wi, wo) for s in starts])
-    material, files, notes = module.finish(result, base, chosen)
+    chosen, tried = _choose(module, prep, fit)
+    chosen = _numbers.writable(chosen, prep.f_model, prep.wi, prep.wo)
+    material, files, notes = module.finish(prep.result, prep.base, chosen)
+    _numbers.check_material(material)
     return Export(
         target=name,
-        model=models.label(result.model, result.options),
-        target_model=chosen.family.name,
+        model=models.label(prep.result.model, prep.result.options),
+        target_model=module.written(material),
         exact=chosen.exact,
         error=chosen.error,
         log_error=chosen.log_error,
         fitted=chosen.fitted,
-        notes=tuple(notes) + (f"error: {ERROR_DEFINITION}",),
+        notes=tuple(notes) + tuple(tried) + (f"error: {ERROR_DEFINITION}",),
         material=material,
         files=files,
     )
+
+
+def export(result: FitResult, target: str, *, fit: bool = True) -> Export:
+    """Map the fitted material of ``result`` to ``target`` and measure the error.
+
+    Tries the target's candidate materials for the model (closed-form starts, kept when
+    exact, else fitted by least squares) and keeps an exact one, else the one with the
+    least log error; its notes list every candidate's errors. Every written number
+    follows :mod:`brdffit.export._numbers` (finite, zero within resolution written as
+    0, float32 normal range), and the errors reported are those of the written numbers.
+
+    Arguments: ``result``; ``target`` one of :data:`TARGETS`; ``fit`` False keeps the
+    closed-form mappings without least squares (fast; exact mappings are unchanged,
+    approximate ones have larger errors).
+
+    Raises :class:`ExportError` for an unknown target or a model the target has no clean
+    mapping for (MaterialX); :class:`~brdffit.errors.ExportValueError` (a subclass)
+    naming a parameter or value that is not finite.
+    """
+    (name,) = parse_targets(target)
+    return _export(_prepare(result), name, fit)
 
 
 def write_exports(
@@ -193,10 +244,12 @@ def write_exports(
 
     Files are ``out_prefix`` plus each export's suffixes (``.mitsuba.xml``,
     ``.mitsuba.json``, ``.gltf``, ``.mtlx``). Every target is checked before anything
-    is written. Returns each export with the paths written.
+    is written, so a refused target or value (:class:`ExportError`) leaves no file.
+    Returns each export with the paths written.
     """
     names = check_targets(models.get(result.model, **dict(result.options)), targets)
-    done = [export(result, t) for t in names]
+    prep = _prepare(result)
+    done = [_export(prep, t) for t in names]
     out = []
     for e in done:
         paths = tuple(Path(f"{out_prefix}{suffix}") for suffix in e.files)
@@ -212,6 +265,7 @@ __all__ = [
     "TARGETS",
     "Export",
     "ExportError",
+    "ExportValueError",
     "check_targets",
     "default_prefix",
     "error_directions",

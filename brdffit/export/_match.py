@@ -39,10 +39,15 @@ CUT_DEG = 80.0
 """Both directions of every pair lie within this angle of the normal (degrees)."""
 EXACT_TOL = 1e-9
 """An export whose error is at most this (float64 evaluation) is exact."""
+BLACK = 1e-10
+"""RMS of ``f cos(theta_i)`` (1/sr) below which a model counts as black: the relative
+error's denominator is floored at it, so a model fitted to ~0 (parameters at 1e-40)
+has a finite, meaningful error instead of a ratio of two round-offs."""
 
 ERROR_DEFINITION = (
     "error = relative RMS of f cos(theta_i) over R, G, B: sqrt(sum ((f_export - f_model) "
-    "cos_i)^2 / sum (f_model cos_i)^2); log error = RMS of ln(1 + f_export cos_i) - "
+    f"cos_i)^2 / max(sum (f_model cos_i)^2, n {BLACK:g}^2)) (n values; a model darker than "
+    f"{BLACK:g} 1/sr RMS is black); log error = RMS of ln(1 + f_export cos_i) - "
     "ln(1 + f_model cos_i); both at the direction pairs of "
     f"brdffit.export.error_directions() ({N_DIRECTIONS} Halton points in Rusinkiewicz "
     "angles, theta_h = (pi/2) u^2 as on the MERL grid, theta_d, phi_d, phi_h uniform; pairs "
@@ -78,11 +83,12 @@ def relative_rms(f_target: np.ndarray, f_model: np.ndarray, cos_i: np.ndarray) -
     """Relative RMS of ``f cos_i``: ``sqrt(sum ((ft - fm) cos_i)^2 / sum (fm cos_i)^2)``.
 
     Arguments: ``f_target`` and ``f_model`` (N, 3) in 1/sr; ``cos_i`` (N,) the cosine of
-    the light direction. Returns 0 for a model that is 0 everywhere and matched exactly.
+    the light direction. The denominator is at least ``n BLACK^2`` (``n`` values,
+    :data:`BLACK`): for a black model the error is the RMS difference over ``BLACK``.
     """
     num = np.sum(((f_target - f_model) * cos_i[:, None]) ** 2)
     den = np.sum((f_model * cos_i[:, None]) ** 2)
-    return float(np.sqrt(num / den)) if den > 0 else float(np.sqrt(num))
+    return float(np.sqrt(num / max(den, f_model.size * BLACK**2)))
 
 
 def log_rms(f_target: np.ndarray, f_model: np.ndarray, cos_i: np.ndarray) -> float:

@@ -199,7 +199,8 @@ def _generic(model: AbstractModel, p: Mapping[str, np.ndarray]) -> list[Start]:
     names = ("kd", "rd", "rho", "albedo", "base_color")
     kd = next((p[n] for n in names if n in p), np.full(3, 0.5))
     alpha = float(np.clip(generic_alpha(p), 1e-4, 1.0))
-    return [_start(alpha, alpha, base_color=kd)]
+    ks = next((p[n] for n in ("ks", "rs", "ks_1", "rho_1") if n in p), np.ones(3))
+    return [_start(alpha, alpha, base_color=kd, specular=float(np.clip(np.mean(ks), 0, 1)))]
 
 
 def candidates(model: AbstractModel, p: Mapping[str, np.ndarray]) -> list[Start]:
@@ -226,6 +227,12 @@ LOSSES = {
     "disney": "Disney's retro-reflective diffuse, subsurface, grazing sheen and GTR1 clear "
     "coat have no glTF counterpart and are approximated by fitted glTF lobes",
 }
+
+
+def written(doc: Mapping[str, object]) -> str:
+    """What a glTF document holds: ``pbrMetallicRoughness`` and the extensions used."""
+    used = doc.get("extensionsUsed", [])
+    return "glTF pbrMetallicRoughness" + (f" + {', '.join(used)}" if used else "")
 
 
 def finish(result: FitResult, model: AbstractModel, m: Match) -> tuple[dict, dict, list[str]]:

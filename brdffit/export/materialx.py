@@ -143,6 +143,12 @@ def to_mtlx(inputs: Mapping[str, object], name: str, comment: str) -> str:
     return "\n".join(lines) + "\n"
 
 
+def written(inputs: Mapping[str, object]) -> str:
+    """What a MaterialX export holds: an ``open_pbr_surface``, metal or diffuse."""
+    metal = float(inputs.get("base_metalness", 0.0)) == 1.0
+    return f"open_pbr_surface ({'metal' if metal else 'diffuse'})"
+
+
 def finish(result: FitResult, model: AbstractModel, m: Match) -> tuple[dict, dict, list[str]]:
     """The OpenPBR inputs, the ``.mtlx`` file and the notes of a chosen match."""
     inputs = m.family.build(m.params)
