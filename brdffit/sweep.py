@@ -31,11 +31,13 @@ written once. ``jobs=1`` without a scheduler runs the tasks in the calling proce
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import json
 import os
+import socket
 import time
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
@@ -44,7 +46,7 @@ import numpy as np
 from brdffit.atomic import remove_temporaries, write_text
 from brdffit.errors import SweepError
 from brdffit.families import family_of
-from brdffit.jobs import has_key
+from brdffit.jobs import has_key, progress_bar
 from brdffit.sweep_tasks import (  # noqa: F401 (the sweep's public names, re-exported)
     Material,
     Task,
@@ -263,7 +265,8 @@ def run_sweep(
     - ``announce``: gets the line naming the Dask scheduler and dashboard.
 
     Raises :class:`~brdffit.errors.ParameterError` for a bad model spec or metric and
-    :class:`SweepError` for a bad setting or folder, before any fit.
+    :class:`SweepError` for a bad setting or folder, or a folder another sweep is
+    running in (:func:`sweep_lock`), before any fit.
     """
     from brdffit import models as registry
     from brdffit.metrics import get_metric
@@ -291,60 +294,61 @@ def run_sweep(
             raise SweepError(f"simplify={simplify!r}: use one of {', '.join(CRITERIA)}")
         settings["simplify"] = simplify
     out.mkdir(parents=True, exist_ok=True)
-    _write_manifest(out, materials, labels, metrics, settings)
-    remove_temporaries(out)
-    tasks = [Task(m, mo, me, settings) for m in materials for mo in labels for me in metrics]
-    todo = [t for t in tasks if not is_finished(t.path(out), simplify)]
-    left = {m.name: sum(t.material.name == m.name for t in todo) for m in materials}
-    counts = {"done": 0, "unconverged": 0, "errors": 0}
-    bar = _progress_bar(len(todo), len(materials), sum(v == 0 for v in left.values()), progress)
+    with sweep_lock(out):  # a second sweep into this folder stops here
+        _write_manifest(out, materials, labels, metrics, settings)
+        remove_temporaries(out)
+        tasks = [Task(m, mo, me, settings) for m in materials for mo in labels for me in metrics]
+        todo = [t for t in tasks if not is_finished(t.path(out), simplify)]
+        left = {m.name: sum(t.material.name == m.name for t in todo) for m in materials}
+        counts = {"done": 0, "unconverged": 0, "errors": 0}
+        bar = _progress_bar(len(todo), len(materials), sum(v == 0 for v in left.values()), progress)
 
-    def record(chunk: Sequence[Task], outcomes: list[dict]) -> None:
-        for task, outcome in zip(chunk, outcomes, strict=True):
-            record_one(task, outcome)
+        def record(chunk: Sequence[Task], outcomes: list[dict]) -> None:
+            for task, outcome in zip(chunk, outcomes, strict=True):
+                record_one(task, outcome)
 
-    def record_one(task: Task, outcome: dict) -> None:
-        status = write_outcome(out, task, outcome)
-        counts["done"] += status["ok"]
-        counts["unconverged"] += status["ok"] and not status["converged"]
-        counts["errors"] += not status["ok"]
-        left[task.material.name] -= 1
-        n_mat = sum(v == 0 for v in left.values())
-        bar.set_postfix_str(
-            f"materials {n_mat}/{len(materials)}, last {task.material.name}/{task.model}",
-            refresh=False,
+        def record_one(task: Task, outcome: dict) -> None:
+            status = write_outcome(out, task, outcome)
+            counts["done"] += status["ok"]
+            counts["unconverged"] += status["ok"] and not status["converged"]
+            counts["errors"] += not status["ok"]
+            left[task.material.name] -= 1
+            n_mat = sum(v == 0 for v in left.values())
+            bar.set_postfix_str(
+                f"materials {n_mat}/{len(materials)}, last {task.material.name}/{task.model}",
+                refresh=False,
+            )
+            bar.update(1)
+
+        def crashed(chunk: Sequence[Task], e: BaseException) -> list[dict]:
+            return [_failure(t, e) for t in chunk]
+
+        if batch < 1:
+            raise SweepError(f"batch={batch}; accepted: 1 or more materials per fit_many call")
+        chunks = _chunks(todo, batch)
+        workers = jobs or os.cpu_count() or 1
+        try:
+            if workers <= 1 and scheduler is None:
+                for c in chunks:
+                    record(c, fit_chunk(c))
+            else:
+                from brdffit.cluster import run_on_dask
+
+                run_on_dask(
+                    chunks, fit_chunk, record, crashed,
+                    scheduler=scheduler, workers=workers, announce=announce,
+                )  # fmt: skip
+        finally:
+            bar.close()
+        return SweepSummary(
+            str(out),
+            len(tasks),
+            len(tasks) - len(todo),
+            counts["done"],
+            counts["unconverged"],
+            counts["errors"],
+            time.perf_counter() - t0,
         )
-        bar.update(1)
-
-    def crashed(chunk: Sequence[Task], e: BaseException) -> list[dict]:
-        return [_failure(t, e) for t in chunk]
-
-    if batch < 1:
-        raise SweepError(f"batch={batch}; accepted: 1 or more materials per fit_many call")
-    chunks = _chunks(todo, batch)
-    workers = jobs or os.cpu_count() or 1
-    try:
-        if workers <= 1 and scheduler is None:
-            for c in chunks:
-                record(c, fit_chunk(c))
-        else:
-            from brdffit.cluster import run_on_dask
-
-            run_on_dask(
-                chunks, fit_chunk, record, crashed,
-                scheduler=scheduler, workers=workers, announce=announce,
-            )  # fmt: skip
-    finally:
-        bar.close()
-    return SweepSummary(
-        str(out),
-        len(tasks),
-        len(tasks) - len(todo),
-        counts["done"],
-        counts["unconverged"],
-        counts["errors"],
-        time.perf_counter() - t0,
-    )
 
 
 def _chunks(tasks: Sequence[Task], size: int) -> list[tuple[Task, ...]]:
@@ -356,9 +360,76 @@ def _chunks(tasks: Sequence[Task], size: int) -> list[tuple[Task, ...]]:
     return [tuple(g[i : i + size]) for g in groups.values() for i in range(0, len(g), size)]
 
 
-def _progress_bar(total: int, n_materials: int, n_finished: int, enabled: bool):
-    from tqdm.auto import tqdm
+LOCK = ".sweep.lock"
+"""The lock file a running sweep holds in its folder: ``<pid> <host>``."""
+STALE_EMPTY_S = 10.0
+"""An empty or garbled lock file older than this is a crash between its creation and
+its first write: stale."""
 
-    bar = tqdm(total=total, desc="sweep", unit="fit", disable=not enabled, dynamic_ncols=True)
+
+def _pid_alive(pid: int) -> bool:
+    """True when a process ``pid`` exists on this machine (signal 0 probes it)."""
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # exists, owned by another user
+        return True
+    except (OSError, OverflowError):
+        return False
+    return True
+
+
+def _lock_holder(path: Path) -> str | None:
+    """Who holds the lock at ``path`` (``"process <pid> on <host>"``), or ``None`` when the
+    lock is stale: its process is dead on this host, or the file is empty or garbled and
+    older than :data:`STALE_EMPTY_S`."""
+    try:
+        text, age = path.read_text(), time.time() - path.stat().st_mtime
+    except OSError:
+        return None  # gone meanwhile
+    fields = text.split()
+    if not fields or not fields[0].isdigit():
+        return None if age > STALE_EMPTY_S else "a sweep that is starting"
+    pid, host = int(fields[0]), fields[1] if len(fields) > 1 else socket.gethostname()
+    if host == socket.gethostname():
+        return f"process {pid}" if _pid_alive(pid) else None
+    return f"process {pid} on {host}"  # another machine's process: cannot be probed
+
+
+@contextlib.contextmanager
+def sweep_lock(out: str | os.PathLike[str]) -> Iterator[Path]:
+    """Hold the lock of sweep folder ``out`` (:data:`LOCK`) while the block runs.
+
+    Two sweeps in one folder would both fit every task; the second raises
+    :class:`SweepError` naming the process that holds the folder. A lock left by a dead
+    process (a kill, a crash) is taken over. The lock file is removed on leaving.
+    """
+    path = Path(out) / LOCK
+    for _ in range(3):  # a stale lock is removed, then the creation is tried again
+        try:
+            fd = os.open(path, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
+        except FileExistsError:
+            holder = _lock_holder(path)
+            if holder is not None:
+                raise SweepError(
+                    f"{out}: another sweep is running in this folder ({holder}; lock file "
+                    f"{path}); wait for it, or delete the lock file if that sweep is gone"
+                ) from None
+            path.unlink(missing_ok=True)
+            continue
+        with os.fdopen(fd, "w") as f:
+            f.write(f"{os.getpid()} {socket.gethostname()}\n")
+        break
+    else:
+        raise SweepError(f"{out}: cannot take the lock file {path}; another sweep keeps taking it")
+    try:
+        yield path
+    finally:
+        path.unlink(missing_ok=True)
+
+
+def _progress_bar(total: int, n_materials: int, n_finished: int, enabled: bool):
+    bar = progress_bar(total, "sweep", "fit", enabled)  # the bar rank and simplify show too
     bar.set_postfix_str(f"materials {n_finished}/{n_materials}", refresh=False)
     return bar
