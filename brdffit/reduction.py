@@ -18,9 +18,11 @@ from brdffit.result import FitResult, nan_to_none
 from brdffit.tables import render
 from brdffit.variants import features
 
-DECISIONS = ("start", "kept", "passed", "removed", "chosen", "failed")
+DECISIONS = ("start", "kept", "deferred", "passed", "removed", "chosen", "failed")
 """A path row's ``decision``: ``start`` (the start model), ``kept`` (the criterion
-rejected the variant: the feature stays), ``passed`` (the criterion accepted it, but a
+rejected the variant: the feature stays), ``deferred`` (rejected at this step, but the
+same change was taken at a later step, from the variant reached meanwhile:
+:func:`brdffit.simplify._mark_deferred`), ``passed`` (the criterion accepted it, but a
 simpler or better variant of the same step was taken), ``removed`` (taken), ``chosen``
 (the variant the search ends on) or ``failed`` (its fit was not finite)."""
 

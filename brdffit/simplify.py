@@ -247,6 +247,7 @@ def _search(s, model, data, metric, full, prep, cut_deg, seed, fit_kwargs) -> Re
     chosen = models.label(node.model)
     i = max(i for i, r in enumerate(path) if r.label == chosen and r.decision in STEPS)
     path[i] = dataclasses.replace(path[i], decision="chosen")
+    path = _mark_deferred(path)
     result = full
     if node.model != model:
         init = {k: v[0] for k, v in node.rows.items()}
@@ -257,6 +258,30 @@ def _search(s, model, data, metric, full, prep, cut_deg, seed, fit_kwargs) -> Re
     gain = s.min_gain if k_folds else math.nan
     return Reduction(tuple(path), chosen, result, full, ratio, s.criterion, k_folds,
                      float(s.n_se), gain, m.name, data.source)  # fmt: skip
+
+
+def _mark_deferred(path: list[PathRow]) -> list[PathRow]:
+    """``kept`` becomes ``deferred`` on a row whose change the search took at a later step.
+
+    Every step tests every move again from the variant it reached, against the best fit
+    met so far (CV) or its parent (BIC). A move refused at one step can pass at a later
+    one: under CV a better variant of the same step raised the bar it was held to (the
+    move's own gain was real, a sibling's was larger), under either criterion the
+    features taken meanwhile changed what the move costs. The table said ``kept`` at
+    the first step and ``chosen`` at the later one (issue 29: "grey ks"); ``deferred``
+    says that the feature did not stay.
+    """
+    taken: dict[str, int] = {}
+    for r in path:
+        if r.step and r.decision in ("removed", "chosen"):
+            for change in r.change.split(" + "):  # a joint move takes each of its changes
+                taken.setdefault(change, r.step)
+    return [
+        dataclasses.replace(r, decision="deferred")
+        if r.decision == "kept" and taken.get(r.change, 0) > r.step
+        else r
+        for r in path
+    ]
 
 
 class _Search:
