@@ -32,6 +32,33 @@ FAMILIES_HELP = (
 )
 
 
+def _seed(text: str) -> int:
+    """``--seed``: an integer >= 0 (numpy's generators take no negative seed)."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"{value} is negative; give an integer >= 0")
+    return value
+
+
+def _count(text: str) -> int:
+    """A count option (``--restarts``, ``--screen``): an integer >= 0."""
+    return _seed(text)
+
+
+def _cut(text: str) -> float:
+    """``--cut``: a zenith cut in degrees, finite and in (0, 90]."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not 0.0 < value <= 90.0:
+        raise argparse.ArgumentTypeError(f"{value:g} degrees; give a zenith cut in (0, 90]")
+    return value
+
+
 class _Parser(argparse.ArgumentParser):
     def error(self, message: str) -> None:  # one line, exit 2
         sys.stderr.write(f"brdffit: {message}\n")
@@ -262,6 +289,10 @@ def cmd_sweep(args) -> None:
         materials = sweep.table_materials(args.table_dir, names)
     else:
         materials = sweep.synthetic_materials(args.synthetic, seed=args.seed)
+    if not args.table_dir:  # a bad stride fails here, not in every task
+        from brdffit.merl import merl_grid
+
+        merl_grid(tuple(args.stride))
     if args.families:
         from brdffit.families import read_families
 
@@ -403,8 +434,8 @@ def build_parser() -> argparse.ArgumentParser:
             choices=sorted(METRICS),
             help="fitting metric (default low_e2; see README, Fitting metrics)",
         )
-        sp.add_argument("--cut", type=float, default=80.0, help="zenith cut, degrees")
-        sp.add_argument("--seed", type=int, default=0, help=SEED_HELP)
+        sp.add_argument("--cut", type=_cut, default=80.0, help="zenith cut, degrees")
+        sp.add_argument("--seed", type=_seed, default=0, help=SEED_HELP)
 
     s = sub.add_parser("models", help="list every model with parameters and options")
     s.set_defaults(func=cmd_models)
@@ -414,10 +445,10 @@ def build_parser() -> argparse.ArgumentParser:
     s = sub.add_parser("fit", help="Levenberg-Marquardt fit of one model")
     data_args(s)
     fit_args(s)
-    s.add_argument("--restarts", type=int, default=1, help="random starts near the first")
+    s.add_argument("--restarts", type=_count, default=1, help="random starts near the first")
     s.add_argument(
         "--screen",
-        type=int,
+        type=_count,
         default=32,
         help="candidates spread over the ranges; the cheapest 8 become starts (0: none)",
     )
@@ -499,15 +530,15 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--models", required=True, help=MODELS_HELP)
     s.add_argument("--metrics", default="low_e2", help="comma-separated metric names")
     _stride_arg(s)
-    s.add_argument("--cut", type=float, default=80.0, help="zenith cut, degrees")
-    s.add_argument("--restarts", type=int, default=1, help="random starts near the first")
+    s.add_argument("--cut", type=_cut, default=80.0, help="zenith cut, degrees")
+    s.add_argument("--restarts", type=_count, default=1, help="random starts near the first")
     s.add_argument(
         "--screen",
-        type=int,
+        type=_count,
         default=32,
         help="candidates spread over the ranges; the cheapest 8 become starts (0: none)",
     )
-    s.add_argument("--seed", type=int, default=0, help=SEED_HELP)
+    s.add_argument("--seed", type=_seed, default=0, help=SEED_HELP)
     s.add_argument(
         "--jobs",
         type=int,

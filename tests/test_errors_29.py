@@ -295,3 +295,21 @@ def test_simplify_table_defers_a_change_taken_later():
 
 def test_errors_are_brdffit_errors():
     assert issubclass(MissingDependencyError, BrdffitError)
+
+
+@pytest.mark.parametrize(
+    ("extra", "needle"),
+    [
+        (["--stride", "2", "2", "2"], "stride for theta_h is 2"),
+        (["--restarts", "-1"], "--restarts"),
+        (["--screen", "-5"], "--screen"),
+        (["--seed", "-1"], "--seed"),
+        (["--cut", "inf"], "--cut"),
+    ],
+)
+def test_sweep_settings_fail_before_any_fit(capsys, tmp_path, extra, needle):
+    # these were recorded as an error per task, exit 0
+    out = tmp_path / "sw"
+    argv = ["sweep", out, "--synthetic", "1", "--models", "lambert", "--jobs", "1", *extra]
+    _fails_cleanly(capsys, [*argv, "--no-progress"], needle)
+    assert not list(out.glob("*/*.json"))
