@@ -32,6 +32,7 @@ from brdffit.export import (
     EXACT_TOL,
     check_targets,
     error_directions,
+    evaluate_model,
     export,
     materialx,
     write_exports,
@@ -98,10 +99,10 @@ def check_numbers(text: str) -> None:
 
 
 def model_fcos(r, wi, wo) -> np.ndarray:
+    """f cos(theta_i) of the fitted model (compiled once per model: see evaluate_model)."""
     model = models.get(r.model, **r.options)
-    with np.errstate(all="ignore"):
-        f = np.asarray(model.eval({k: np.asarray(v) for k, v in r.params.items()}, wi, wo))
-    return f * wi[:, 2:3]
+    params = {k: np.asarray(v, float) for k, v in r.params.items()}
+    return np.asarray(evaluate_model(model, params, wi, wo)) * wi[:, 2:3]
 
 
 def rel_rms(f_cos: np.ndarray, ref_cos: np.ndarray) -> float:
@@ -202,8 +203,9 @@ def test_every_model_exports_at_drawn_parameters(mi, spec, data, tmp_path_factor
     check_exports(mi, spec, params, tmp_path_factory.mktemp("x"))
 
 
-@pytest.mark.parametrize("which", [1, 2], ids=["near_low", "near_high"])
-@pytest.mark.parametrize("spec", ["walter", "cook_torrance", "blinn_phong"])
+@pytest.mark.parametrize(  # least squares costs 1-10 s an export: two corners only
+    "spec,which", [("walter", 2), ("blinn_phong", 1)], ids=["walter-near_high", "phong-near_low"]
+)
 def test_fitted_exports_at_bounds(mi, spec, which, tmp_path):
     check_exports(mi, spec, corner(spec, which), tmp_path, fit=True)
 

@@ -30,6 +30,7 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
+import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
@@ -138,6 +139,14 @@ def default_prefix(input_path: str | Path, json_path: str | Path | None, label: 
     return Path(f"{Path(input_path).stem}.{safe}")
 
 
+@eqx.filter_jit
+def evaluate_model(model: object, params: dict, wi: jnp.ndarray, wo: jnp.ndarray) -> jnp.ndarray:
+    """``model.eval(params, wi, wo)`` compiled once per model and options, then reused for
+    every parameter value (an export evaluates the model at 2,556 pairs; eagerly, the
+    runtime type checks of every term cost more than the evaluation). f in 1/sr, (N, 3)."""
+    return model.eval(params, wi, wo)
+
+
 @dataclass(frozen=True, eq=False)
 class _Prepared:
     """A fit made ready for every target: the base model, its full RGB parameters and
@@ -161,7 +170,7 @@ def _prepare(result: FitResult) -> _Prepared:
     wi, wo = error_directions()
     model = models.get(result.model, **dict(result.options))
     params = {k: np.asarray(v, float) for k, v in result.params.items()}
-    f = np.asarray(model.eval(params, wi, wo), float)
+    f = np.asarray(evaluate_model(model, params, wi, wo), float)
     bad = ~np.isfinite(f)
     if bad.any():
         raise ExportValueError(

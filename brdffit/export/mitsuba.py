@@ -126,7 +126,8 @@ def conductor_family(kind: str, aniso: bool, with_diffuse: bool) -> Family:
 
     slots = _diffuse_slots(with_diffuse) + _alpha_slots(aniso)
     slots += (Slot("eta", 3, 0.0, 10.0), Slot("k", 3, 0.0, 20.0), Slot("specular", 3, 0.0, 1.0))
-    return Family(f"roughconductor ({kind})", slots, evaluate, build)
+    name = f"roughconductor[distribution={kind}]"
+    return Family(f"blendbsdf(diffuse, {name})" if with_diffuse else name, slots, evaluate, build)
 
 
 PRINCIPLED_FEATURES = (
@@ -166,7 +167,7 @@ def principled_family(features: tuple[str, ...], with_diffuse: bool = False) -> 
     )
     slots += () if metal else (Slot("specular", 1, 1e-3, 1.0),)
     slots += tuple(Slot(f, 1, 0.0, 1.0) for f in features)
-    name = "blendbsdf(diffuse, principled metallic=1)" if metal else "principled"
+    name = "blendbsdf(diffuse, principled[metallic=1])" if metal else "principled"
     return Family(name, slots, evaluate, build)
 
 
@@ -383,8 +384,6 @@ ROUGHNESS = {
     "Cook-Torrance's rms slope m): copied, not squared",
     "principled": "principled roughness is squared by Mitsuba (alpha = max(0.001, "
     "roughness^2)): a GGX alpha is written as sqrt(alpha), a perceptual roughness as it is",
-    "blendbsdf": "principled roughness is squared by Mitsuba (alpha = max(0.001, "
-    "roughness^2)): a GGX alpha is written as sqrt(alpha)",
     "diffuse": "diffuse: no roughness",
 }
 
@@ -421,7 +420,7 @@ def finish(result: FitResult, model: AbstractModel, m: Match) -> tuple[dict, dic
         if m.exact
         else LOSSES.get(model.name, f"{model.name}'s lobes become {m.family.name}")
     )
-    rough = next(v for k, v in ROUGHNESS.items() if m.family.name.startswith(k))
+    rough = next(v for k, v in ROUGHNESS.items() if k in m.family.name)
     notes = [f"roughness: {rough}", f"{kind}: {lost}"]
     if "weight" in m.params:
         notes.append(
