@@ -6,8 +6,15 @@ implementation of the target's BRDF, checked against Mitsuba 3 and an independen
 glTF implementation by the tests) and the model at :func:`error_directions`, and
 reports the relative RMS error of ``f cos(theta_i)`` and the RMS error of
 ``ln(1 + f cos(theta_i))`` (:data:`ERROR_DEFINITION`). An export is *exact* when the
-relative error is at float64 round-off (``EXACT_TOL``); otherwise its parameters were
-fitted to the model by least squares (on the log error) and the errors are those left.
+relative error is at float64 round-off (``EXACT_TOL``); otherwise every candidate form
+the target offers is fitted to the model by least squares (on the log error), the one
+with the least log error is written, and the errors are those left.
+
+Every number written passes one rule, :mod:`brdffit.export._numbers`: finite (else
+:class:`~brdffit.errors.ExportValueError` naming it, before any file is written), a
+value within resolution of a bound written as the bound, and 0 or a normal float32
+(Mitsuba parses with ``std::stof``, which throws on subnormals). ``Export.target_model``
+names exactly what was written (for Mitsuba the BSDF tree).
 
 Targets (each module documents its mapping, roughness convention and losses):
 
@@ -203,6 +210,7 @@ def _choose(module: types.ModuleType, prep: _Prepared, fit: bool) -> tuple[Match
 
 
 def _export(prep: _Prepared, name: str, fit: bool = True) -> Export:
+    """:func:`export` of a prepared fit to the checked target ``name``."""
     module = TARGETS[name]
     reason = getattr(module, "unsupported", lambda m: None)(prep.base)
     if reason:
