@@ -14,7 +14,7 @@ from brdffit import models, synthesize
 from brdffit.cli import main
 
 FUZZ = settings(
-    max_examples=40,
+    max_examples=60,
     deadline=None,
     derandomize=True,  # the same strings every run: a failure is reproducible
     suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow],
@@ -42,6 +42,20 @@ BASE = {
     "rank": ["rank", "{csv}", "--no-progress"],
     "simplify": ["simplify", "{csv}", "--model", "lambert", "--criterion", "bic", "--no-progress"],
     "info": ["info"],
+    "report": ["report"],
+    "sweep": [
+        "sweep",
+        "sw",
+        "--models",
+        "lambert",
+        "--stride",
+        "15",
+        "15",
+        "15",
+        "--jobs",
+        "1",
+        "--no-progress",
+    ],  # fmt: skip
 }
 OPTIONS = [
     ("fit", "--cut"), ("fit", "--freeze"), ("fit", "--seed"), ("fit", "--restarts"),
@@ -50,7 +64,8 @@ OPTIONS = [
     ("sample", "--steps"), ("sample", "--walkers"), ("sample", "--subsample"),
     ("sample", "--noise"), ("sample", "--freeze"), ("rank", "--models"), ("rank", "--by"),
     ("simplify", "--folds"), ("simplify", "--n-se"), ("simplify", "--min-gain"),
-    ("info", None),
+    ("info", None), ("report", None), ("sweep", "--synthetic"), ("sweep", "--metrics"),
+    ("sweep", "--materials"), ("sweep", "--batch"), ("sweep", "--cut"),
 ]  # fmt: skip
 
 
@@ -72,6 +87,8 @@ def _argv(csv: Path, command: str, option: str | None, value: str) -> list[str]:
         return [*argv, option, value, value, value]
     if option == "--robust-scale":
         return [*argv, "--robust", "huber", option, value]
+    if command == "sweep" and option != "--synthetic":
+        argv += ["--synthetic", "1"]
     if option == "--models" or command == "rank":
         return [*argv, option, value] + ([] if option == "--models" else ["--models", "lambert"])
     return [*argv, f"{option}={value}"]  # = keeps a value that starts with '-' a value
@@ -83,6 +100,8 @@ def _argv(csv: Path, command: str, option: str | None, value: str) -> list[str]:
 @example(case=("fit", "--cut"), value="inf")  # a RuntimeWarning line beside the error
 @example(case=("sample", "--steps"), value="0")
 @example(case=("fit", "--freeze"), value="kd=abc")
+@example(case=("report", None), value="sw")  # a folder that is not a sweep's
+@example(case=("sweep", "--synthetic"), value="2")
 def test_random_option_values_end_in_0_or_2(capsys, csv, tmp_path, monkeypatch, case, value):
     monkeypatch.chdir(tmp_path)  # exports and other default outputs land here
     command, option = case
