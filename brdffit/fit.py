@@ -140,6 +140,17 @@ def fit_many(
     s = _Settings(**kwargs)
     if not datasets:
         raise ParameterError("fit_many: no data set given")
+    for d in datasets:
+        if not isinstance(d, Measurements):
+            hint = (
+                " (an NBRDF network: evaluate it with brdffit.nbrdf.read_nbrdf_measurements)"
+                if type(d).__name__ == "NBRDF"
+                else ""
+            )
+            raise ParameterError(
+                f"fit takes Measurements (from a reader or synthesize); got "
+                f"{type(d).__name__}{hint}"
+            )
     m = metrics_mod.get_metric(metric)
     first = start_params(model, s.init)
     obj = Objective.build(model, m, freeze_map(model, s.freeze, first))

@@ -227,3 +227,13 @@ def test_a_fit_with_every_parameter_frozen_evaluates_and_reports():
     r = fit(lam, data, "low_e2", freeze={"kd": 0.5})
     assert r.converged and r.n_free == 0 and r.errors_reason == "no free parameter"
     assert r.loss < 1e-25  # the frozen value is the truth: noise-free data, exact fit
+
+
+def test_fit_refuses_what_is_not_measurements_and_names_the_nbrdf_reader():
+    class NBRDF:  # stands for the network read_nbrdf returns
+        pass
+
+    with pytest.raises(ParameterError, match="read_nbrdf_measurements"):
+        fit(models.get("lambert"), NBRDF())
+    with pytest.raises(ParameterError, match="got dict"):
+        fit(models.get("lambert"), {})
