@@ -49,6 +49,7 @@ from brdffit.export._match import (
     ERROR_DEFINITION,
     EXACT_TOL,
     Match,
+    albedo_directions,
     best,
     error_directions,
     log_rms,
@@ -73,7 +74,9 @@ class Export:
     ``exact`` (measured error <= ``EXACT_TOL``); ``error`` (relative RMS of ``f cos_i``)
     and ``log_error`` (RMS of ``ln(1 + f cos_i)`` differences), :data:`ERROR_DEFINITION`;
     ``fitted`` (the target's parameters were fitted by least
-    squares rather than mapped in closed form); ``notes`` (roughness convention, what is
+    squares rather than mapped in closed form); ``albedo_error`` (RMS relative error of
+    the directional albedo per channel at 4 views, :func:`~brdffit.export._match.albedo_error`;
+    0 for an exact export, where it is not measured); ``notes`` (roughness convention, what is
     lost); ``material`` (the Mitsuba dict, the glTF document, the OpenPBR inputs);
     ``files`` (file suffix -> text, what :func:`write_exports` writes).
     """
@@ -85,6 +88,7 @@ class Export:
     error: float
     log_error: float
     fitted: bool
+    albedo_error: float
     notes: tuple[str, ...]
     material: dict
     files: dict[str, str]
@@ -94,7 +98,8 @@ class Export:
         kind = "exact" if self.exact else "approximate" + (" (fitted)" if self.fitted else "")
         return (
             f"{self.target}: {kind}, relative RMS error of f cos(theta_i) {self.error:.3g}, "
-            f"log error {self.log_error:.3g} ({self.model} -> {self.target_model})"
+            f"log error {self.log_error:.3g}, albedo error {self.albedo_error:.3g} "
+            f"({self.model} -> {self.target_model})"
         )
 
 
@@ -156,8 +161,9 @@ def evaluate_model(model: object, params: dict, wi: jnp.ndarray, wo: jnp.ndarray
 
 @dataclass(frozen=True, eq=False)
 class _Prepared:
-    """A fit made ready for every target: the base model, its full RGB parameters and
-    its values ``f_model`` (N, 3, 1/sr) at the error directions ``wi``, ``wo``."""
+    """A fit made ready for every target: the base model, its full RGB parameters, its
+    values ``f_model`` (N, 3, 1/sr) at the error directions ``wi``, ``wo`` and
+    ``albedo`` at :func:`~brdffit.export._match.albedo_directions`."""
 
     result: FitResult
     base: object
@@ -165,6 +171,7 @@ class _Prepared:
     f_model: np.ndarray
     wi: np.ndarray
     wo: np.ndarray
+    albedo: np.ndarray
 
 
 def _prepare(result: FitResult) -> _Prepared:
@@ -175,9 +182,11 @@ def _prepare(result: FitResult) -> _Prepared:
     """
     _numbers.require_finite("the fit's parameter", result.params)
     wi, wo = error_directions()
+    a_wi, a_wo = albedo_directions()
     model = models.get(result.model, **dict(result.options))
     params = {k: np.asarray(v, float) for k, v in result.params.items()}
-    f = np.asarray(evaluate_model(model, params, wi, wo), float)
+    both = evaluate_model(model, params, np.vstack([wi, a_wi]), np.vstack([wo, a_wo]))
+    f = np.asarray(both, float)  # one compiled call for both direction sets
     bad = ~np.isfinite(f)
     if bad.any():
         raise ExportValueError(
@@ -191,7 +200,7 @@ def _prepare(result: FitResult) -> _Prepared:
     if isinstance(model, Restricted):
         params = model.expand({k: jnp.asarray(v) for k, v in params.items()})
     params = {k: np.array(v, float) for k, v in params.items()}
-    return _Prepared(result, base_of(model), params, f, wi, wo)
+    return _Prepared(result, base_of(model), params, f[: len(wi)], wi, wo, f[len(wi) :])
 
 
 def _choose(module: types.ModuleType, prep: _Prepared, fit: bool) -> tuple[Match, list[str]]:
@@ -201,11 +210,23 @@ def _choose(module: types.ModuleType, prep: _Prepared, fit: bool) -> tuple[Match
     args = (prep.f_model, prep.wi, prep.wo)
     first = [match(fam, start, *args, fit=False) for fam, start in starts]
     exact = [m for m in first if m.exact]
-    tried = exact[:1] or ([match(*s, *args) for s in starts] if fit else first)
+    if exact:
+        return exact[0], []
+    with_albedo = {"albedo": prep.albedo}
+    if fit:
+        tried = [match(*s, *args, **with_albedo) for s in starts]
+    else:
+        tried = [match(*s, *args, fit=False, **with_albedo) for s in starts]
     chosen = best(tried)
     if len(tried) > 1:
-        text = "; ".join(f"{m.family.name} {m.error:.3g} / {m.log_error:.3g}" for m in tried)
-        return chosen, [f"candidates (error / log error): {text}; kept the least log error"]
+        text = "; ".join(
+            f"{m.family.name} {m.error:.3g} / {m.log_error:.3g} / {m.albedo_error:.3g}"
+            for m in tried
+        )
+        return chosen, [
+            f"candidates (error / log error / albedo error): {text}; kept the least "
+            "log error + albedo error"
+        ]
     return chosen, []
 
 
@@ -216,7 +237,7 @@ def _export(prep: _Prepared, name: str, fit: bool = True) -> Export:
     if reason:
         raise ExportError(f"export {name}: {reason}")
     chosen, tried = _choose(module, prep, fit)
-    chosen = _numbers.writable(chosen, prep.f_model, prep.wi, prep.wo)
+    chosen = _numbers.writable(chosen, prep.f_model, prep.wi, prep.wo, prep.albedo)
     material, files, notes = module.finish(prep.result, prep.base, chosen)
     _numbers.check_material(material)
     return Export(
@@ -227,6 +248,7 @@ def _export(prep: _Prepared, name: str, fit: bool = True) -> Export:
         error=chosen.error,
         log_error=chosen.log_error,
         fitted=chosen.fitted,
+        albedo_error=chosen.albedo_error,
         notes=tuple(notes) + tuple(tried) + (f"error: {ERROR_DEFINITION}",),
         material=material,
         files=files,
@@ -238,7 +260,8 @@ def export(result: FitResult, target: str, *, fit: bool = True) -> Export:
 
     Tries the target's candidate materials for the model (closed-form starts, kept when
     exact, else fitted by least squares) and keeps an exact one, else the one with the
-    least log error; its notes list every candidate's errors. Every written number
+    least log error plus albedo error (:func:`~brdffit.export._match.best`); its notes
+    list every candidate's errors. Every written number
     follows :mod:`brdffit.export._numbers` (finite, zero within resolution written as
     0, float32 normal range), and the errors reported are those of the written numbers.
 
@@ -283,9 +306,11 @@ __all__ = [
     "Export",
     "ExportError",
     "ExportValueError",
+    "albedo_directions",
     "check_targets",
     "default_prefix",
     "error_directions",
+    "evaluate_model",
     "export",
     "log_rms",
     "parse_targets",

@@ -30,7 +30,15 @@ from collections.abc import Mapping
 import numpy as np
 
 from brdffit.errors import ExportValueError
-from brdffit.export._match import EXACT_TOL, Family, Match, log_rms, relative_rms
+from brdffit.export._match import (
+    EXACT_TOL,
+    Family,
+    Match,
+    albedo_directions,
+    albedo_error,
+    log_rms,
+    relative_rms,
+)
 
 FLOAT32_TINY = float(np.finfo(np.float32).tiny)
 """Smallest normal float32, 1.1754944e-38: below it ``std::stof`` throws (subnormal)."""
@@ -81,14 +89,22 @@ def snap_params(family: Family, params: Mapping[str, object]) -> dict[str, objec
     return out
 
 
-def writable(match: Match, f_model: np.ndarray, wi: np.ndarray, wo: np.ndarray) -> Match:
+def writable(
+    match: Match,
+    f_model: np.ndarray,
+    wi: np.ndarray,
+    wo: np.ndarray,
+    albedo: np.ndarray | None = None,
+) -> Match:
     """``match`` with its slot values as they will be written, errors measured again.
 
     Arguments: ``f_model`` (N, 3) the fitted model at ``wi``, ``wo`` (1/sr), the pairs
-    the match was measured at. Returns ``match`` itself when nothing changed.
+    the match was measured at; ``albedo`` the model at
+    :func:`~brdffit.export._match.albedo_directions`, or None. Returns ``match`` itself
+    when nothing changed.
     """
     params = snap_params(match.family, match.params)
-    error, log_error = match.error, match.log_error
+    error, log_error, a_error = match.error, match.log_error, match.albedo_error
     same = all(
         np.array_equal(np.asarray(params[s.name]), np.asarray(match.params[s.name]))
         for s in match.family.slots
@@ -97,11 +113,14 @@ def writable(match: Match, f_model: np.ndarray, wi: np.ndarray, wo: np.ndarray) 
         f = match.family.evaluate(params, wi, wo)
         require_finite(f"{match.family.name} value", {"f": f})
         error, log_error = relative_rms(f, f_model, wi[:, 2]), log_rms(f, f_model, wi[:, 2])
+        if albedo is not None:
+            a_error = albedo_error(match.family.evaluate(params, *albedo_directions()), albedo)
     # the errors are written too (file comments, glTF extras): the same float32 rule
     error, log_error = (0.0 if abs(x) < FLOAT32_TINY else x for x in (error, log_error))
     if same and (error, log_error) == (match.error, match.log_error):
         return match
-    return Match(match.family, params, error, log_error, match.start_error, match.fitted)
+    fitted = match.fitted
+    return Match(match.family, params, error, log_error, match.start_error, fitted, a_error)
 
 
 def check_material(material: object, path: str = "material") -> None:
