@@ -141,16 +141,7 @@ def fit_many(
     if not datasets:
         raise ParameterError("fit_many: no data set given")
     for d in datasets:
-        if not isinstance(d, Measurements):
-            hint = (
-                " (an NBRDF network: evaluate it with brdffit.nbrdf.read_nbrdf_measurements)"
-                if type(d).__name__ == "NBRDF"
-                else ""
-            )
-            raise ParameterError(
-                f"fit takes Measurements (from a reader or synthesize); got "
-                f"{type(d).__name__}{hint}"
-            )
+        require_measurements(d)
     m = metrics_mod.get_metric(metric)
     first = start_params(model, s.init)
     obj = Objective.build(model, m, freeze_map(model, s.freeze, first))
@@ -170,6 +161,21 @@ def fit_many(
             raise FitError(f"fit of {model.name} to {data.source}: {r.status.value}", r)
         results.append(r)
     return results
+
+
+def require_measurements(data: object) -> None:
+    """Raise :class:`ParameterError` unless ``data`` is :class:`Measurements`, naming the
+    NBRDF reader when ``data`` is the network ``read_nbrdf`` returns."""
+    if isinstance(data, Measurements):
+        return
+    hint = (
+        " (an NBRDF network: evaluate it with brdffit.nbrdf.read_nbrdf_measurements)"
+        if type(data).__name__ == "NBRDF"
+        else ""
+    )
+    raise ParameterError(
+        f"fit takes Measurements (from a reader or synthesize); got {type(data).__name__}{hint}"
+    )
 
 
 @dataclass(frozen=True)
