@@ -204,7 +204,7 @@ def test_every_model_exports_at_drawn_parameters(mi, spec, data, tmp_path_factor
 
 
 @pytest.mark.parametrize(  # least squares costs 1-10 s an export: two corners only
-    "spec,which", [("walter", 2), ("blinn_phong", 1)], ids=["walter-near_high", "phong-near_low"]
+    "spec,which", [("ward", 2), ("blinn_phong", 1)], ids=["ward-near_high", "phong-near_low"]
 )
 def test_fitted_exports_at_bounds(mi, spec, which, tmp_path):
     check_exports(mi, spec, corner(spec, which), tmp_path, fit=True)
