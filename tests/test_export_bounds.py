@@ -124,17 +124,24 @@ def check_mitsuba(mi, e, ref, wi, wo, tmp_path, every: int) -> None:
     path.write_text(e.files[".mitsuba.xml"])
     mi.load_file(str(path))
     got = mitsuba_fcos(mi, mi.load_dict(e.material), wi[::every], wo[::every])
+    # float32 in Mitsuba: ~10 roundings (test_export), amplified in sharp peaks, where the
+    # half vector's float32 rounding enters D through (h / alpha)^2: measured relative
+    # differences 2.5e-5 at alpha 0.01, 1.3e-4 at 0.001 (f ~ 1e5), 1e-3 at 1e-4 (f ~ 4e6),
+    # 2.5e-3 for alphas 0.05 x 1e-4
+    rtol = 5e-3
     if every > 1:
         if e.exact:
             scale = np.abs(ref).max()
-            np.testing.assert_allclose(got, ref[::every], rtol=1e-5, atol=1e-6 * scale + 1e-12)
+            np.testing.assert_allclose(got, ref[::every], rtol=rtol, atol=1e-6 * scale + 1e-12)
         return
-    if e.exact:  # float32 in Mitsuba: ~10 roundings (test_export)
-        np.testing.assert_allclose(got, ref, rtol=1e-5, atol=1e-6 * np.abs(ref).max() + 1e-12)
+    if e.exact:  # Mitsuba's own error is then float32 noise, up to 2e-4 in sharp peaks
+        np.testing.assert_allclose(got, ref, rtol=rtol, atol=1e-6 * np.abs(ref).max() + 1e-12)
+        return
     # float32 evaluation in Mitsuba: 1% of the error (principled's clear coat at gloss 1,
-    # alpha 0.001, cancels in 1 + (a^2 - 1) cos^2: 0.5% of the log error), or 1e-5
-    assert close(rel_rms(got, ref), e.error, 1e-2, 1e-5), (rel_rms(got, ref), e.summary())
-    assert close(log_err(got, ref), e.log_error, 1e-2, 1e-6), e.summary()
+    # alpha 0.001, cancels in 1 + (a^2 - 1) cos^2: 0.5% of the log error), or the float32
+    # noise of sharp peaks (above: up to 2e-4 relative, 3e-5 in the RMS error)
+    assert close(rel_rms(got, ref), e.error, 1e-2, 3e-4), (rel_rms(got, ref), e.summary())
+    assert close(log_err(got, ref), e.log_error, 1e-2, 3e-5), e.summary()
 
 
 def check_gltf(e, ref, wi, wo) -> None:
@@ -144,8 +151,8 @@ def check_gltf(e, ref, wi, wo) -> None:
     # float64 both sides
     assert close(rel_rms(got, ref), e.error, 1e-7, 1e-12), e.summary()
     assert close(log_err(got, ref), e.log_error, 1e-7, 1e-12), e.summary()
-    if e.exact:
-        np.testing.assert_allclose(got, ref, rtol=1e-8, atol=1e-9 * np.abs(ref).max() + 1e-15)
+    if e.exact:  # EXACT_TOL bounds the RMS: a snapped 1e-16 lobe differs by 1e-8 pointwise
+        np.testing.assert_allclose(got, ref, rtol=1e-8, atol=1e-7 * np.abs(ref).max() + 1e-15)
 
 
 def check_exports(mi, spec: str, params: dict, tmp_path, fit: bool = False, every: int = 1):
