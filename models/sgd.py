@@ -199,12 +199,14 @@ def smith_lambda(q: jax.Array, alpha: jax.Array, p: jax.Array) -> jax.Array:
     return jnp.exp(scaled_log_lambda(q, alpha, p) - u - p * jnp.log(u))
 
 
-def lambda_table(alpha: jax.Array, p: jax.Array) -> tuple[jax.Array, jax.Array]:
+def _table(alpha: jax.Array, p: jax.Array) -> tuple[jax.Array, jax.Array]:
     """``y = ln(Lambda e^u u^p)`` and ``dy/dtau`` at the table nodes (module docstring).
 
     ``tau = ln x``, ``x = cot theta / sqrt(alpha) = 1/sqrt(q)``: :data:`TABLE_NODES`
     equispaced nodes on :data:`TABLE_TAU`. The derivative is forward mode through the
-    quadrature. Each of shape ``alpha.shape + (TABLE_NODES,)``.
+    quadrature. Each of shape ``alpha.shape + (TABLE_NODES,)``. Its own JVP rule
+    differentiates the quadrature in ``alpha`` and ``p`` once, whatever the number of
+    tangents (a fit's Jacobian pushes 14, of which only these two reach the table).
     """
     shape = jnp.shape(alpha) + (TABLE_NODES,)
     tau = jnp.broadcast_to(
@@ -215,6 +217,20 @@ def lambda_table(alpha: jax.Array, p: jax.Array) -> tuple[jax.Array, jax.Array]:
         return scaled_log_lambda(jnp.exp(-2.0 * tt), _last(alpha), _last(p))
 
     return jax.jvp(y, (tau,), (jnp.ones_like(tau),))
+
+
+lambda_table = jax.custom_jvp(_table)
+
+
+@lambda_table.defjvp
+def _lambda_table_jvp(primals: tuple, tangents: tuple) -> tuple:
+    alpha, p = primals
+    da, dp = tangents
+    # each channel's table depends on its own alpha, p only: one direction each suffices
+    out, by_alpha = jax.jvp(lambda a: _table(a, p), (alpha,), (jnp.ones_like(alpha),))
+    by_p = jax.jvp(lambda pp: _table(alpha, pp), (p,), (jnp.ones_like(p),))[1]
+    tan = tuple(ya * _last(da) + yp * _last(dp) for ya, yp in zip(by_alpha, by_p, strict=True))
+    return out, tan
 
 
 def smith_lambda_table(
