@@ -402,8 +402,9 @@ def _subset(
 ) -> metrics_mod.Prepared:
     """Every k-th kept sample so that at most ``n`` remain (``prep`` itself if no thinning).
 
-    ``like``: the same data thinned already under another metric; its geometry, cosines
-    and values are shared (the metrics differ only in target and weight).
+    ``like``: the same data thinned already under another metric; its geometry and
+    cosines are shared (target, weight and values are the metric's own: a log metric
+    leaves out channels a linear one fits, :func:`brdffit.metrics.channels_used`).
     """
     if n is None or prep.n <= 2 * n:
         return prep
@@ -412,5 +413,5 @@ def _subset(
         return jax.tree.map(lambda a: a[idx], prep)
     return metrics_mod.Prepared(
         g=like.g, cos_i=like.cos_i, target=prep.target[idx], weight=prep.weight[idx],
-        values=like.values,
+        values=prep.values[idx],
     )  # fmt: skip

@@ -241,3 +241,25 @@ def test_fit_refuses_what_is_not_measurements_and_names_the_nbrdf_reader():
     with pytest.raises(ParameterError, match="got dict"):
         require_measurements({})
     require_measurements(synthesize(models.get("lambert"), {"kd": 0.5}, stride=15))
+
+
+def test_thinned_starts_keep_each_metrics_own_values():
+    """A log metric leaves out a signed value below ln(1 + x)'s domain that a linear
+    metric fits; thinning one metric's data like the other's must keep its own values."""
+    from brdffit.fit import _subset
+    from brdffit.metrics import prepare_all
+
+    data = synthesize(models.get("lambert"), {"kd": 0.5}, stride=9)
+    values = np.array(data.values)
+    values[np.flatnonzero(data.valid)[::7], 1] = -3.0  # f cos far below -1
+    signed = Measurements.from_directions(
+        data.wi, data.wo, values, valid=data.valid, negative="signed"
+    )
+    preps = prepare_all(signed)
+    lin, log = preps["ngan"], preps["low_e2"]
+    assert not np.array_equal(np.asarray(lin.values), np.asarray(log.values))
+    small_lin = _subset(lin, 40)
+    small_log = _subset(log, 40, like=small_lin)
+    idx = np.linspace(0, log.n - 1, 40).round().astype(int)
+    np.testing.assert_array_equal(small_log.values, np.asarray(log.values)[idx])
+    np.testing.assert_array_equal(small_log.weight, np.asarray(log.weight)[idx])
