@@ -111,7 +111,7 @@ def numpy_residual(layout, metric, data, keep, weight):
     """The metric's residual vector in numpy, geometry computed once."""
     g = geometry(data, keep)
     ci = g["ci"][:, None]
-    root_w = np.sqrt(weight)[:, None]
+    root_w = np.sqrt(weight)  # (N, 3): the metric's weight per sample and channel
     fd = data.values[keep] * ci
     target = np.log1p(np.maximum(fd, -0.999)) if metric.log1p else fd
 
@@ -137,11 +137,9 @@ def linear_start(layout, metric, data, keep, weight, g):
     f_zero = brdf(zero, g)
     f_one = brdf(one, g) - f_zero
     ci = g["ci"]
-    w = np.sqrt(weight) * ci
+    w = np.sqrt(weight) * ci[:, None]
     if metric.log1p:
-        w = w[:, None] / (1 + np.maximum(data.values[keep] * ci[:, None], 0))
-    else:
-        w = np.repeat(w[:, None], 3, axis=1)
+        w = w / (1 + np.maximum(data.values[keep] * ci[:, None], 0))
     for c in range(3):
         a = np.stack([np.full(len(ci), 1 / np.pi), f_one[:, c]], axis=1) * w[:, c : c + 1]
         b = (data.values[keep][:, c] - f_zero[:, c]) * w[:, c]
