@@ -30,14 +30,40 @@ def enable_compilation_cache(path: str | None = None) -> None:
     """Keep XLA executables on disk so later processes skip most compile time.
 
     ``path`` defaults to ``$BRDFFIT_JAX_CACHE`` or ``~/.cache/brdffit/jax``; setting
-    ``BRDFFIT_JAX_CACHE=off`` disables it. The command line and the tests call this.
+    ``BRDFFIT_JAX_CACHE=off`` disables it. The command line and the Dask workers call
+    this; the test suite does not (see ``tests/conftest.py``).
+
+    Entries go into a subfolder named after this host's CPU and jaxlib, because JAX's
+    cache key names neither: a home folder shared by machines of different CPUs (a
+    cluster's NFS home) would otherwise hand one machine code compiled for another,
+    and XLA aborts the process while loading it, with no Python exception to catch.
     """
     path = path or os.environ.get("BRDFFIT_JAX_CACHE", "~/.cache/brdffit/jax")
     if path.lower() in ("off", "0", "none", ""):
         return
-    jax.config.update("jax_compilation_cache_dir", os.path.expanduser(path))
+    folder = os.path.join(os.path.expanduser(path), _host_tag())
+    jax.config.update("jax_compilation_cache_dir", folder)
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.2)
     jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
+
+
+def _host_tag() -> str:
+    """A short name for (machine, CPU model and flags, jaxlib version)."""
+    import hashlib
+    import platform
+
+    cpu = ""
+    try:
+        with open("/proc/cpuinfo", encoding="utf-8", errors="replace") as f:
+            cpu = "".join(line for line in f if line.startswith(("model name", "flags")))[:20000]
+    except OSError:
+        cpu = platform.processor()
+    try:
+        jaxlib = metadata.version("jaxlib")
+    except metadata.PackageNotFoundError:
+        jaxlib = "unknown"
+    digest = hashlib.sha256(f"{platform.machine()}|{cpu}|{jaxlib}".encode()).hexdigest()
+    return f"{platform.machine()}-jaxlib{jaxlib}-{digest[:12]}"
 
 
 from brdffit import models  # noqa: E402
