@@ -149,6 +149,7 @@ def test_fit_command_works_for_every_model(capsys, merl_file, tmp_path, name):
     assert np.isfinite(d["loss"])
 
 
+@pytest.mark.slow  # 23 s; test_errors_29.py runs `simplify` through the command line fast
 def test_simplify_prints_the_path_and_the_chosen_label(capsys, merl_file, tmp_path):
     # the fixture's kd and f0 are coloured and its diffuse term is on: nothing goes
     js, start = tmp_path / "simplify.json", "walter[specular_weight=false]"

@@ -5,7 +5,14 @@ from __future__ import annotations
 import json
 from html.parser import HTMLParser
 
+import pytest
+
 from brdffit.demo import TRUTH, run_demo
+
+# 36-43 s on 2 cores: in the slow tier (bash benchmarks/slow_checks.sh). Its parts stay
+# in the default suite: fit, sample, rank, report and export through the command line
+# (tests/test_cli.py, test_html_report.py, test_export.py).
+pytestmark = pytest.mark.slow
 
 
 def test_demo_writes_fits_posterior_report_and_exports(tmp_path):

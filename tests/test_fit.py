@@ -29,7 +29,7 @@ def walter():
     return models.get("walter")
 
 
-@pytest.mark.parametrize("metric", ["low_e2", "ngan"])
+@pytest.mark.parametrize("metric", ["low_e2", pytest.param("ngan", marks=pytest.mark.slow)])
 def test_noise_free_ggx_lambert_recovered_to_1e6(walter, metric):
     data = synthesize(walter, TRUTH, stride=GRID)
     r = fit(walter, data, metric)

@@ -25,7 +25,8 @@ def _materials(n: int) -> list:
     return out
 
 
-@pytest.mark.parametrize("robust", [None, "huber"])
+# the robust row (10 s) is slow; robust single fits are in the default suite (test_fit.py)
+@pytest.mark.parametrize("robust", [None, pytest.param("huber", marks=pytest.mark.slow)])
 def test_fit_many_equals_one_fit_per_material(robust):
     walter = models.get("walter")
     data = _materials(3)

@@ -3,7 +3,9 @@
 Parameters a row declares ``not_identifiable`` (with the reason) are frozen at the
 truth; every other parameter must come back from the defaults (plus two seeded
 restarts) to 1e-3 relative. The directions are the same for every row (one geometry).
-Rows after the first of each model are marked ``slow`` (``python3 -m pytest -m slow``).
+Rows after the first of each model are marked ``slow`` (``bash benchmarks/slow_checks.sh``),
+and so are the first rows of the models whose fit alone costs 13-40 s on 2 cores
+(:data:`SLOW_MODELS`).
 """
 
 from __future__ import annotations
@@ -21,11 +23,16 @@ from tests.helpers import random_pairs
 WI, WO = random_pairs(7, 1500)
 
 _FIRST: set[str] = set()
+SLOW_MODELS = frozenset({"sgd", "std", "disney"})
+"""Models whose identifiability fit takes 13-40 s here (SGD's Smith table, STD's continued
+fraction, Disney's 16 free scalars): the default suite keeps their precision and
+property tests (``tests/test_model_*.py``) and fits Disney in ``tests/test_fit.py``."""
 
 
 def _param(case):
-    """The first row of each model runs in the default suite; further option rows are slow."""
-    first = case.model not in _FIRST
+    """The first row of each model runs in the default suite (but :data:`SLOW_MODELS`);
+    further option rows are slow."""
+    first = case.model not in _FIRST and case.model not in SLOW_MODELS
     _FIRST.add(case.model)
     return pytest.param(case, id=case.id, marks=() if first else pytest.mark.slow)
 

@@ -26,7 +26,8 @@ from brdffit.metrics import get_metric, prepare
     [
         "baseline",
         "near_mirror",
-        "outliers_huber",
+        # 12 s; robust fits stay in the default suite in tests/test_fit.py
+        pytest.param("outliers_huber", marks=pytest.mark.slow),
         "missing_half",
     ],
 )
@@ -79,6 +80,7 @@ def test_direction_weights_are_the_solid_angle_measure(kind):
     assert np.all(cut[:, 2] > math.cos(math.radians(80.0)))
 
 
+@pytest.mark.slow  # 11 s: checks the stress suite's own cases (benchmarks/stability.py)
 def test_every_model_has_roles_and_valid_truths():
     assert set(stress.ROLES) == set(models.available())
     for name in models.available():
@@ -233,6 +235,7 @@ def test_fits_that_all_end_above_the_truths_own_objective_are_not_recovered():
     assert case["recovery"] == 1.0
 
 
+@pytest.mark.slow  # 16 s: the stress benchmark's bookkeeping of a failed case
 def test_a_corrupted_case_records_the_plain_descent_from_the_truth():
     d = stress.run_case("walter", "low_e2", "noise30", n_starts=1, n_samples=300)
     assert d["local"]["status"] == "CONVERGED" and d["local"]["objective"] is not None

@@ -284,6 +284,7 @@ def test_checkout_commit_reports_only_the_packages_own_checkout(tmp_path):
     assert checkout_commit(tmp_path / "brdffit") == own + "-dirty"
 
 
+@pytest.mark.slow  # 38-43 s; the engine's own worker-loss test (tests/test_cluster.py) is fast
 def test_sweep_on_dask_survives_a_killed_worker(tmp_path):
     """A worker process killed while the sweep runs: Dask runs its task again on another
     worker and every result is written once (issue 31)."""
