@@ -182,12 +182,11 @@ class Objective(eqx.Module):
 
     def _natural_jacobian(self, z: Array, prep: Prepared) -> tuple[Array, Array, Array]:
         """``(J, e, r)``: the robust residuals' Jacobian in natural units, ``e`` and ``r``."""
-        log = self.layout.solver_log_mask()
-        x = jnp.where(log, jnp.exp(z), z)
+        layout = self.layout
+        x = layout.from_solver(z)
 
         def robust(xn: Array) -> tuple[Array, tuple[Array, Array]]:
-            zz = jnp.where(log, jnp.log(jnp.where(log, xn, 1.0)), xn)
-            r = self.residuals(zz, prep)
+            r = self.residuals(layout.to_solver(xn), prep)
             e = metrics_mod.robust_residuals(r, self.robust, self.scale)
             return e, (e, r)
 

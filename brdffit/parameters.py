@@ -12,8 +12,9 @@ Every parameter has a name, a shape (``()`` scalar or ``(3,)`` RGB), bounds
 Random starts and MCMC walkers live in the unconstrained ``u`` space. The
 least-squares solver works in a third, bounded space (:attr:`Parameter.solver_log`):
 ``ln x`` for a positive scale with a positive lower bound (roughness, exponents),
-the natural ``x`` for everything else, with the bounds as a box. Reports are in the
-natural ``x`` space.
+the natural ``x`` for everything else, with the bounds as a box. A parameter whose table
+row names a partner in :attr:`Parameter.product_with` is solved jointly with it, as
+``(ln(partner x), 1/x)`` (see there). Reports are in the natural ``x`` space.
 """
 
 from __future__ import annotations
@@ -46,7 +47,17 @@ class Parameter:
     a simpler published form of the model (Disney's ``specular`` 0.5, the common
     dielectric F0 0.04; the Student-t shape ``gamma`` 2, which is GGX) or ``None``:
     :func:`brdffit.simplify` may pin it there, the spec option ``neutral``
-    (:mod:`brdffit.models._restrict`).
+    (:mod:`brdffit.models._restrict`); ``product_with`` the name of a partner ``a``
+    when the data pin down the product ``a x`` far better than either: while both are
+    free, the solver works on ``(ln(a x), 1/x)`` (:meth:`ParameterLayout.to_solver`).
+
+    ``product_with`` is for a curve ``(1 + a u)^-x`` such as Löw's ABC lobe: near its
+    peak it is ``exp(-a x u + (a x u)^2 / (2 x) - ...)``, so ``a x`` sets the peak's
+    width and ``x`` enters only through ``1/x``. In ``(ln a, ln x)`` the loss has a
+    curved valley along ``a x = const`` whose floor is nearly linear in ``1/x``;
+    Gauss-Newton steps along it are short (78 LM steps on blue-metallic-paint at stride
+    5 5 9, all 512 at full resolution). In ``(ln(a x), 1/x)`` the valley is a coordinate
+    line and the loss along it nearly linear: 30 steps to the same optimum.
     """
 
     name: str
@@ -58,6 +69,7 @@ class Parameter:
     linear: bool = False
     solver: Literal["natural", "log"] | None = None
     neutral: float | None = None
+    product_with: str | None = None
 
     def __post_init__(self) -> None:
         lo, hi = self.bounds
@@ -81,6 +93,10 @@ class Parameter:
             raise ParameterError(f"parameter {self.name!r}: solver 'log' needs low >= 0")
         if self.shape not in ((), (3,)):
             raise ParameterError(f"parameter {self.name!r}: shape {self.shape} not () or (3,)")
+        if self.product_with is not None and (self.shape != () or not lo > 0):
+            raise ParameterError(
+                f"parameter {self.name!r}: product_with needs a scalar with low > 0"
+            )
 
     @property
     def size(self) -> int:
@@ -232,19 +248,58 @@ class ParameterLayout:
         the space of :attr:`Parameter.solver_log`.
         """
         out = dict(self.frozen)
+        if space == "solver":
+            flat = self.from_solver(flat)
         for p, v in zip(self.free, self.split(flat).values(), strict=True):
-            if space == "unconstrained":
-                v = p.to_natural(v)
-            elif space == "solver" and p.solver_log:
-                v = jnp.exp(v)
-            out[p.name] = v
+            out[p.name] = p.to_natural(v) if space == "unconstrained" else v
         return out
+
+    def pairs(self) -> tuple[tuple[int, int], ...]:
+        """``(i, j)`` flat indices of the jointly solved pairs: ``j`` a free parameter with
+        :attr:`Parameter.product_with`, ``i`` its free partner (none when it is frozen)."""
+        index, i = {}, 0
+        for p in self.free:
+            index[p.name] = i
+            i += p.size
+        out = []
+        for p in self.free:
+            partner = next((q for q in self.free if q.name == p.product_with), None)
+            if partner is not None and partner.shape == ():
+                out.append((index[partner.name], index[p.name]))
+        return tuple(out)
+
+    def to_solver(self, x: jax.Array) -> jax.Array:
+        """Flat natural -> flat solver vector (traced): ``ln x`` where :attr:`solver_log`,
+        ``(ln(x_i x_j), 1/x_j)`` for each pair of :meth:`pairs`, ``x`` elsewhere."""
+        log = jnp.asarray(self.solver_log_mask())
+        z = jnp.where(log, jnp.log(jnp.where(log, x, 1.0)), x)
+        for i, j in self.pairs():
+            z = z.at[i].set(jnp.log(x[i]) + jnp.log(x[j])).at[j].set(1.0 / x[j])
+        return z
+
+    def from_solver(self, z: jax.Array) -> jax.Array:
+        """Flat solver -> flat natural vector (traced), the inverse of :meth:`to_solver`.
+
+        A pair's box is the product of its members' boxes, so ``x_i = e^(z_i) z_j`` can
+        leave ``x_i``'s bounds: it is clipped there (its bound then holds it, as the box
+        holds any other parameter).
+        """
+        log = jnp.asarray(self.solver_log_mask())
+        x = jnp.where(log, jnp.exp(z), z)
+        lo, hi = self.bounds_flat()
+        for i, j in self.pairs():
+            a = jnp.clip(jnp.exp(z[i]) * z[j], lo[i], hi[i])
+            x = x.at[j].set(1.0 / z[j]).at[i].set(a)
+        return x
 
     def solver_vector(self, params: Mapping[str, object]) -> np.ndarray:
         """Natural dict -> flat solver-space vector of the free parameters, clipped into
         the box (numpy: starts are made on the host)."""
         x = np.clip(self.natural_vector(params), *self.bounds_flat())
-        return np.where(self.solver_log_mask(), np.log(np.maximum(x, 1e-300)), x)
+        z = np.where(self.solver_log_mask(), np.log(np.maximum(x, 1e-300)), x)
+        for i, j in self.pairs():
+            z[i], z[j] = np.log(x[i]) + np.log(x[j]), 1.0 / x[j]
+        return z
 
     def natural_vector(self, params: Mapping[str, object]) -> np.ndarray:
         """Natural dict -> flat natural vector of the free parameters, in the order of
@@ -253,7 +308,9 @@ class ParameterLayout:
         return np.concatenate(flat) if flat else np.zeros(0)
 
     def solver_log_mask(self) -> np.ndarray:
-        """Per free scalar: True where the solver works on ``ln x``."""
+        """Per free scalar: True where the parameter is a scale the solver works on in
+        ``ln x`` (:attr:`Parameter.solver_log`; the members of :meth:`pairs` have their
+        own coordinates, :meth:`to_solver`)."""
         return np.concatenate(
             [np.full(p.size, p.solver_log) for p in self.free] or [np.zeros(0, bool)]
         )
@@ -265,7 +322,11 @@ class ParameterLayout:
         log = self.solver_log_mask()
         with np.errstate(divide="ignore"):
             log_lo, log_hi = np.log(np.where(log, lo, 1.0)), np.log(np.where(log, hi, 1.0))
-        return np.where(log, log_lo, lo), np.where(log, log_hi, hi)
+        zlo, zhi = np.where(log, log_lo, lo), np.where(log, log_hi, hi)
+        for i, j in self.pairs():
+            zlo[i], zhi[i] = np.log(lo[i] * lo[j]), np.log(hi[i] * hi[j])
+            zlo[j], zhi[j] = 1.0 / hi[j], 1.0 / lo[j]
+        return zlo, zhi
 
     def bounds_flat(self) -> tuple[np.ndarray, np.ndarray]:
         """Lower and upper bounds of each free scalar."""

@@ -45,6 +45,12 @@ sees ``k = 1`` there); the curves are evaluated as ``exp(-C log1p(B x))``; ``1/(
 cos_o)`` is cancelled to first order by the V-cavity ``G``. Not energy conserving
 (``kd`` and ``ks`` uncoupled, ``F/F(1)`` reaches ``1/F(1)`` at grazing). Reciprocal,
 isotropic.
+
+Fitting: near the peak ``(1 + B x)^-C = exp(-BC x + (BC x)^2 / (2C) - ...)``, so the
+data fix the product ``BC`` (the peak's width) long before ``C`` (the departure from a
+Gaussian, through ``1/C`` only). The least-squares solver therefore works on
+``(ln BC, 1/C)`` rather than ``(ln B, ln C)`` (:attr:`Parameter.product_with`); the
+parameters and their errors are reported as the paper's ``B`` and ``C``.
 """
 
 from __future__ import annotations
@@ -72,7 +78,15 @@ PARAMETERS = (
         linear=True,
     ),
     Parameter("B", (), (0.1, 1e8), 100.0, "log", "ABC curve width parameter, unitless"),
-    Parameter("C", (), (1e-3, 10.0), 1.5, "log", "ABC curve fall-off exponent, unitless"),
+    Parameter(
+        "C",
+        (),
+        (1e-3, 10.0),
+        1.5,
+        "log",
+        "ABC curve fall-off exponent, unitless",
+        product_with="B",  # solved as (ln BC, 1/C): see the module docstring
+    ),
     Parameter(
         "eta",
         (),

@@ -73,3 +73,62 @@ def test_the_neutral_f0_of_disney_and_filament_is_the_common_dielectric():
 def test_a_neutral_value_outside_the_bounds_is_a_typed_error():
     with pytest.raises(ParameterError, match="'x': neutral 2.0 outside bounds"):
         Parameter("x", (), (0.0, 1.0), 0.5, "logit", "a fraction", neutral=2.0)
+
+
+def _low_layout(freeze=None):
+    from brdffit.objective import Objective
+
+    return Objective.build(models.get("low"), "low_e2", freeze).layout
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    b=st.floats(0.1, 1e8),
+    c=st.floats(1e-3, 10.0),
+)
+def test_a_product_pair_is_solved_as_log_product_and_reciprocal(b, c):
+    # Löw's C names B in product_with: the solver sees (ln BC, 1/C), and the map goes back
+    lay = _low_layout()
+    i, j = lay.pairs()[0]
+    assert [lay.labels()[i], lay.labels()[j]] == ["B", "C"]
+    params = models.get("low").defaults() | {"B": b, "C": c}
+    z = lay.solver_vector(params)
+    assert z[i] == pytest.approx(math.log(b * c), rel=1e-12, abs=1e-12)
+    assert z[j] == pytest.approx(1.0 / c, rel=1e-12)
+    np.testing.assert_allclose(
+        np.asarray(lay.to_solver(jnp.asarray(lay.natural_vector(params)))),
+        z,
+        rtol=1e-12,
+        atol=1e-12,
+    )
+    back = lay.params(jnp.asarray(z), "solver")
+    assert float(back["B"]) == pytest.approx(b, rel=1e-12)
+    assert float(back["C"]) == pytest.approx(c, rel=1e-12)
+    lo, hi = lay.solver_bounds()
+    assert lo[i] <= z[i] <= hi[i] and lo[j] <= z[j] <= hi[j]
+
+
+def test_a_pair_keeps_its_partner_inside_its_bounds_and_splits_when_one_is_frozen():
+    lay = _low_layout()
+    i, j = lay.pairs()[0]
+    lo, hi = lay.solver_bounds()
+    assert (lo[i], hi[i]) == pytest.approx((math.log(0.1 * 1e-3), math.log(1e8 * 10.0)))
+    assert (lo[j], hi[j]) == pytest.approx((0.1, 1000.0))
+    # the box's corner (BC = 1e9, 1/C = 1000) asks for B = 1e12: B is held at 1e8
+    z = lay.solver_vector(models.get("low").defaults())
+    z[i], z[j] = hi[i], hi[j]
+    x = lay.params(jnp.asarray(z), "solver")
+    assert float(x["B"]) == 1e8 and float(x["C"]) == pytest.approx(1e-3)
+    # with B frozen, C is an ordinary log-scale parameter again
+    frozen = _low_layout({"B": 5.0})
+    assert frozen.pairs() == ()
+    assert frozen.solver_vector({"kd": [0.3] * 3, "ks": [0.2] * 3, "C": 2.0, "eta": 1.5})[
+        frozen.labels().index("C")
+    ] == pytest.approx(math.log(2.0))
+
+
+def test_product_with_needs_a_positive_scalar():
+    with pytest.raises(ParameterError, match="product_with"):
+        Parameter("C", (3,), (1e-3, 10.0), 1.0, "log", "x", product_with="B")
+    with pytest.raises(ParameterError, match="product_with"):
+        Parameter("C", (), (0.0, 10.0), 1.0, "logit", "x", product_with="B")
