@@ -248,10 +248,18 @@ class ParameterLayout:
         the space of :attr:`Parameter.solver_log`.
         """
         out = dict(self.frozen)
-        if space == "solver":
-            flat = self.from_solver(flat)
         for p, v in zip(self.free, self.split(flat).values(), strict=True):
-            out[p.name] = p.to_natural(v) if space == "unconstrained" else v
+            if space == "unconstrained":
+                v = p.to_natural(v)
+            elif space == "solver" and p.solver_log:
+                v = jnp.exp(v)  # per parameter: the same operations as the fits before pairs
+            out[p.name] = v
+        if space == "solver":
+            lo, hi = self.bounds_flat()
+            labels = self.labels()
+            for i, j in self.pairs():
+                out[labels[j]] = 1.0 / flat[j]
+                out[labels[i]] = jnp.clip(jnp.exp(flat[i]) * flat[j], lo[i], hi[i])
         return out
 
     def pairs(self) -> tuple[tuple[int, int], ...]:
