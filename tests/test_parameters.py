@@ -102,6 +102,10 @@ def test_a_product_pair_is_solved_as_log_product_and_reciprocal(b, c):
         atol=1e-12,
     )
     back = lay.params(jnp.asarray(z), "solver")
+    # the flat inverse (the covariance's natural Jacobian) agrees with the dict one
+    np.testing.assert_allclose(
+        np.asarray(lay.from_solver(jnp.asarray(z))), lay.natural_vector(back), rtol=1e-15
+    )
     assert float(back["B"]) == pytest.approx(b, rel=1e-12)
     assert float(back["C"]) == pytest.approx(c, rel=1e-12)
     lo, hi = lay.solver_bounds()
