@@ -248,20 +248,10 @@ class ParameterLayout:
         the space of :attr:`Parameter.solver_log`.
         """
         out = dict(self.frozen)
-        for p, v in zip(self.free, self.split(flat).values(), strict=True):
-            if space == "unconstrained":
-                v = p.to_natural(v)
-            elif space == "solver" and p.solver_log:
-                # per parameter, not one exp over the flat vector: XLA's vector and scalar
-                # exp differ in the last bit, and a fit's tie-breaks between starts follow
-                v = jnp.exp(v)
-            out[p.name] = v
         if space == "solver":
-            lo, hi = self.bounds_flat()
-            labels = self.labels()
-            for i, j in self.pairs():
-                out[labels[j]] = 1.0 / flat[j]
-                out[labels[i]] = jnp.clip(jnp.exp(flat[i]) * flat[j], lo[i], hi[i])
+            flat = self.from_solver(flat)
+        for p, v in zip(self.free, self.split(flat).values(), strict=True):
+            out[p.name] = p.to_natural(v) if space == "unconstrained" else v
         return out
 
     def pairs(self) -> tuple[tuple[int, int], ...]:
@@ -294,8 +284,17 @@ class ParameterLayout:
         leave ``x_i``'s bounds: it is clipped there (its bound then holds it, as the box
         holds any other parameter).
         """
-        log = jnp.asarray(self.solver_log_mask())
-        x = jnp.where(log, jnp.exp(z), z)
+        if not self.free:
+            return z
+        # exp per parameter, not over the flat vector: XLA's vector and scalar exp differ
+        # in the last bit, and a fit's tie-breaks between starts follow that bit
+        parts = self.split(z).values()
+        x = jnp.concatenate(
+            [
+                jnp.ravel(jnp.exp(v) if p.solver_log else v)
+                for p, v in zip(self.free, parts, strict=True)
+            ]
+        )
         lo, hi = self.bounds_flat()
         for i, j in self.pairs():
             a = jnp.clip(jnp.exp(z[i]) * z[j], lo[i], hi[i])

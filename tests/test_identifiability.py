@@ -25,7 +25,7 @@ WI, WO = random_pairs(7, 1500)
 _FIRST: set[str] = set()
 SLOW_MODELS = frozenset({"sgd", "std", "disney"})
 """Models whose identifiability fit takes 13-40 s here (SGD's Smith table, STD's continued
-fraction, Disney's 16 free scalars): the default suite keeps their precision and
+fraction, Disney's 13 free scalars): the default suite keeps their precision and
 property tests (``tests/test_model_*.py``) and fits Disney in ``tests/test_fit.py``."""
 
 
