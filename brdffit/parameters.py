@@ -245,7 +245,7 @@ class ParameterLayout:
         """Flat free vector in ``space`` -> natural dict of every parameter (frozen ones too).
 
         The one place a flat vector becomes the dict a model evaluates; ``solver`` is
-        the space of :attr:`Parameter.solver_log`.
+        the space of :meth:`from_solver` (:attr:`Parameter.solver_log`, pairs).
         """
         out = dict(self.frozen)
         if space == "solver":
