@@ -13,11 +13,31 @@ over the box ``lo <= z <= hi``. Each iteration tries one step:
    the units of a parameter, and a column can shrink without its damping collapsing.
 3. **Projection** onto the box (Kanzow, Yamashita, Fukushima 2004): the trial is
    ``clip(z + d)``, so a parameter whose optimum is on its bound lands on it exactly.
-4. **Gain ratio** ``rho = (C(z) - C(trial)) / (-(g.s + 0.5 s.H.s))`` of the projected
-   step ``s``. The step is accepted when ``rho > 0`` (a non-finite trial cost is a
-   rejection), and ``lambda`` follows Nielsen (1999): times
-   ``max(1/3, 1 - (2 rho - 1)^3)`` after an accepted step, times ``nu`` (then
-   ``nu`` doubles) after a rejected one.
+4. **Gain ratio** ``rho = (C(z) - C(trial)) / (-(g.s + 0.5 s.B.s))`` of the projected
+   step ``s`` under the model matrix ``B`` that made it. The step is accepted when
+   ``rho > 0`` (a non-finite trial cost is a rejection), and ``lambda`` follows Nielsen
+   (1999): times ``max(1/3, 1 - (2 rho - 1)^3)`` after an accepted step, times ``nu``
+   (then ``nu`` doubles) after a rejected one.
+5. **Large residuals** (NL2SOL: Dennis, Gay & Welsch 1981). ``H`` leaves out the
+   residual curvature ``S = sum_i w_i r_i grad^2 r_i``; where the residuals stay large
+   at the optimum (a model that cannot fit the material) ``S`` can dominate, every
+   Gauss-Newton step overshoots, ``lambda`` grows and the descent crawls. A secant
+   estimate of ``S`` is kept from the gradients of accepted steps: sized by
+   ``min(1, |s.y#| / |s.S.s|)``, then the Dennis-Gay-Welsch update with
+   ``y# = g+ - g - H+ s`` (NL2SOL's ``(J+ - J)^T r+`` needs the last Jacobian, n x k
+   floats; ours agrees with it to first order in ``s``, the structured secant of
+   Dennis & Walker 1981), skipped unless ``y.s > 0``. Which model makes the step: the
+   Gauss-Newton one after an accepted step that lowered the cost by a fifth or more
+   (Fletcher & Xu 1987, whose hybrid uses ``eps = 0.2``: Gauss-Newton is then
+   converging as on a small-residual problem); otherwise NL2SOL's adaptive rule, by
+   which the model changes only after a step it predicted poorly (``rho < 1/4``, the
+   trust-region threshold of Nocedal & Wright, Alg. 4.1) and only to the model whose
+   predicted reduction of that step was nearer the actual one. ``lambda`` grows after
+   every rejected step whatever the model, so two models that both fail cannot
+   alternate forever, and an augmented matrix that is not positive definite (Cholesky
+   fails) gives the Gauss-Newton step instead. Until Gauss-Newton slows down and
+   mispredicts a step that ``H + S`` predicts better, the descent is plain
+   Levenberg-Marquardt; the estimate costs k x k arithmetic, no evaluation of the model.
 
 It stops (:class:`Reason`) when the projected gradient is orthogonal to the residuals
 to ``gtol`` (MINPACK's test, scale-invariant: ``max_i |g_i| / (|J_i| |r|)``, binding
@@ -35,6 +55,7 @@ from __future__ import annotations
 
 import enum
 from dataclasses import dataclass
+from typing import Any, Protocol, runtime_checkable
 
 import equinox as eqx
 import jax
@@ -42,12 +63,30 @@ import jax.numpy as jnp
 from jax import lax
 from jaxtyping import Array, Bool, Float, Int
 
-from brdffit.metrics import Prepared
-from brdffit.objective import Objective
-
 TAU = 1e-3
 """Initial damping relative to Marquardt's scale: Madsen, Nielsen & Tingleff (2004, sec.
 3.2) recommend 1e-3 for a start that is not known to be close; ours are linear solves."""
+
+FAST = 0.2
+"""Relative cost decrease of an accepted step above which the next step is Gauss-Newton:
+Fletcher & Xu's (1987) ``eps`` in their hybrid Gauss-Newton / quasi-Newton method."""
+
+
+@runtime_checkable
+class LeastSquares(Protocol):
+    """What the solver needs of a problem ``C(z) = 0.5 sum rho(r(z)^2)`` on data ``prep``.
+
+    :class:`brdffit.objective.Objective` (``prep`` a :class:`brdffit.metrics.Prepared`)
+    is the one the package solves; tests also give it textbook residual functions.
+    """
+
+    def cost(self, z: Array, prep: Any) -> Array:
+        """``C(z)``."""
+        ...
+
+    def linearize(self, z: Array, prep: Any) -> tuple[Array, Array, Array]:
+        """``(C, g, H)`` at ``z``: cost, gradient and Gauss-Newton matrix."""
+        ...
 
 
 class Reason(enum.IntEnum):
@@ -79,15 +118,21 @@ class Descent(eqx.Module):
     """State and outcome of one descent (all arrays, so that it vmaps).
 
     Fields: ``z`` the point (solver space); ``cost`` ``C(z)``; ``g`` and ``h`` the
-    gradient and Gauss-Newton matrix at ``z``; ``lam`` and ``nu`` the damping and its
-    growth factor; ``d`` Marquardt's scale; ``steps`` tried steps; ``reason``
-    (:class:`Reason` value); ``binding`` the scalars held on a bound at the end.
+    gradient and Gauss-Newton matrix at ``z``; ``curv`` the secant estimate of the
+    residual curvature ``S``, ``augmented`` whether the next step uses ``H + S`` and
+    ``slow`` whether the last accepted step lowered the cost by less than a fifth
+    (module docstring, item 5); ``lam`` and ``nu`` the damping and its growth factor;
+    ``d`` Marquardt's scale; ``steps`` tried steps; ``reason`` (:class:`Reason` value);
+    ``binding`` the scalars held on a bound at the end.
     """
 
     z: Float[Array, " k"]
     cost: Float[Array, ""]
     g: Float[Array, " k"]
     h: Float[Array, "k k"]
+    curv: Float[Array, "k k"]
+    augmented: Bool[Array, ""]
+    slow: Bool[Array, ""]
     lam: Float[Array, ""]
     nu: Float[Array, ""]
     d: Float[Array, " k"]
@@ -110,9 +155,7 @@ def _gradient_test(cost: Array, g: Array, h: Array, binding: Array) -> Array:
     return jnp.where(rnorm > 0, jnp.max(ratio, initial=0.0), 0.0)
 
 
-def init(
-    obj: Objective, z0: Array, prep: Prepared, lo: Array, hi: Array, tol: Tolerances
-) -> Descent:
+def init(obj: LeastSquares, z0: Array, prep: Any, lo: Array, hi: Array, tol: Tolerances) -> Descent:
     """The state at ``z0`` (clipped into the box): one linearisation."""
     z = jnp.clip(z0, lo, hi)
     cost, g, h = obj.linearize(z, prep)
@@ -123,27 +166,68 @@ def init(
     diag = jnp.diag(h)
     d = jnp.where(jnp.isfinite(diag) & (diag > 0), diag, 1.0)
     one = jnp.ones((), z.dtype)
-    return Descent(z, cost, g, h, TAU * one, 2.0 * one, d, jnp.zeros((), int), reason, binding)
+    return Descent(
+        z=z, cost=cost, g=g, h=h, curv=jnp.zeros_like(h), augmented=jnp.zeros((), bool),
+        slow=jnp.zeros((), bool),
+        lam=TAU * one, nu=2.0 * one, d=d, steps=jnp.zeros((), int), reason=reason,
+        binding=binding,
+    )  # fmt: skip
+
+
+def _secant(curv: Array, sz: Array, g0: Array, g1: Array, h1: Array) -> Array:
+    """NL2SOL's sized Dennis-Gay-Welsch update of ``S`` along the accepted step ``sz``.
+
+    ``y = g1 - g0``; ``y# = y - h1 sz`` (module docstring, item 5). ``S`` is first
+    scaled by ``min(1, |sz.y#| / |sz.S.sz|)`` so that it never claims more curvature
+    along the step than was seen, then updated so that ``S+ sz = y#`` with the least
+    change in the norm DGW weight by ``y``; unchanged unless ``y.sz > 0``.
+    """
+    y = g1 - g0
+    yhat = y - h1 @ sz
+    ssz = sz @ curv @ sz
+    size = jnp.where(ssz != 0, jnp.minimum(1.0, jnp.abs(sz @ yhat) / jnp.abs(ssz)), 1.0)
+    sized = size * curv
+    v = yhat - sized @ sz
+    ys = y @ sz
+    safe = jnp.where(ys > 0, ys, 1.0)
+    new = sized + (jnp.outer(v, y) + jnp.outer(y, v)) / safe - (v @ sz) * jnp.outer(y, y) / safe**2
+    ok = (ys > 0) & jnp.all(jnp.isfinite(new))
+    return jnp.where(ok, new, curv)
 
 
 def step(
-    obj: Objective, s: Descent, prep: Prepared, lo: Array, hi: Array, tol: Tolerances
+    obj: LeastSquares, s: Descent, prep: Any, lo: Array, hi: Array, tol: Tolerances
 ) -> Descent:
-    """One tried step (module docstring, items 1-4) and the stopping tests."""
+    """One tried step (module docstring, items 1-5) and the stopping tests."""
     free = ~s.binding
     both = free[:, None] & free[None, :]
-    m = jnp.where(both, s.h + s.lam * jnp.diag(s.d), jnp.eye(s.z.size, dtype=s.z.dtype))
+    eye = jnp.eye(s.z.size, dtype=s.z.dtype)
     rhs = jnp.where(free, -s.g, 0.0)
-    chol = jnp.linalg.cholesky(m)
-    d = jax.scipy.linalg.cho_solve((chol, True), rhs)
+
+    def damped_step(b: Array) -> Array:
+        chol = jnp.linalg.cholesky(jnp.where(both, b + s.lam * jnp.diag(s.d), eye))
+        return jax.scipy.linalg.cho_solve((chol, True), rhs)
+
+    d_gn = damped_step(s.h)
+    d_aug = damped_step(s.h + s.curv)
+    augmented = s.augmented & jnp.all(jnp.isfinite(d_aug))  # not positive definite: GN
+    d = jnp.where(augmented, d_aug, d_gn)
     d = jnp.where(jnp.all(jnp.isfinite(d)), d, 0.0)  # lambda overflowed: a null step
     trial = jnp.clip(s.z + d, lo, hi)
     sz = trial - s.z
-    predicted = -(s.g @ sz + 0.5 * sz @ s.h @ sz)
+    pred_gn = -(s.g @ sz + 0.5 * sz @ s.h @ sz)
+    pred_aug = pred_gn - 0.5 * sz @ s.curv @ sz
+    predicted = jnp.where(augmented, pred_aug, pred_gn)
     c_trial = obj.cost(trial, prep)
     actual = s.cost - c_trial
     ok = jnp.isfinite(c_trial) & (predicted > 0) & (actual > 0)
     gain = jnp.where(ok, actual / jnp.where(predicted > 0, predicted, 1.0), 0.0)
+    # the next step's model (item 5): Gauss-Newton after a fast accepted step (Fletcher
+    # and Xu); after a poorly predicted one, the model that predicted it better (NL2SOL)
+    slow = jnp.where(ok, actual < FAST * s.cost, s.slow)
+    nearer_aug = jnp.abs(actual - pred_aug) < jnp.abs(actual - pred_gn)
+    poor = (gain < 0.25) & jnp.isfinite(c_trial)
+    next_aug = slow & jnp.where(poor, nearer_aug, augmented)
     lam = jnp.where(ok, s.lam * jnp.maximum(1.0 / 3.0, 1.0 - (2.0 * gain - 1.0) ** 3), s.lam * s.nu)
     nu = jnp.where(ok, 2.0, 2.0 * s.nu)
 
@@ -157,7 +241,9 @@ def step(
     # the step and cost tests need no Jacobian at the trial: a descent that stops on
     # them keeps the last one (its gradient and Gauss-Newton matrix are those of the
     # point one step, below the tolerances, before)
-    cost, g, h = lax.cond(ok & ~small_f & ~small_x, relinearize, lambda: (s.cost, s.g, s.h))
+    moved = ok & ~small_f & ~small_x
+    cost, g, h = lax.cond(moved, relinearize, lambda: (s.cost, s.g, s.h))
+    curv = jnp.where(moved, _secant(s.curv, sz, s.g, g, h), s.curv)
     cost = jnp.where(ok, c_trial, cost)
     finite = jnp.all(jnp.isfinite(g)) & jnp.all(jnp.isfinite(h))
     z = jnp.where(ok, trial, s.z)
@@ -170,11 +256,11 @@ def step(
         [Reason.NONFINITE, Reason.GTOL, Reason.GTOL, Reason.FTOL, Reason.XTOL, Reason.MAX_STEPS],
         Reason.RUNNING,
     )
-    return Descent(z, cost, g, h, lam, nu, dscale, steps, reason, binding)
+    return Descent(z, cost, g, h, curv, next_aug, slow, lam, nu, dscale, steps, reason, binding)
 
 
 def solve(
-    obj: Objective, z0: Array, prep: Prepared, lo: Array, hi: Array, tol: Tolerances
+    obj: LeastSquares, z0: Array, prep: Any, lo: Array, hi: Array, tol: Tolerances
 ) -> Descent:
     """Descend from ``z0`` until a stopping test holds (module docstring); traceable."""
 
@@ -200,13 +286,13 @@ def batch_size() -> int | None:
 
 
 @eqx.filter_jit
-def solve_one(obj: Objective, z0: Array, prep: Prepared, lo: Array, hi: Array, tol: Tolerances):
+def solve_one(obj: LeastSquares, z0: Array, prep: Any, lo: Array, hi: Array, tol: Tolerances):
     """:func:`solve` compiled for one start."""
     return solve(obj, z0, prep, lo, hi, tol)
 
 
 def solve_batch(
-    obj: Objective, z0: Array, prep: Prepared, lo: Array, hi: Array, tol: Tolerances, batch
+    obj: LeastSquares, z0: Array, prep: Any, lo: Array, hi: Array, tol: Tolerances, batch
 ) -> Descent:
     """:func:`solve` from every row of ``z0`` (S, k) on the same data, in one loop over
     the starts (``batch`` of them at a time, :func:`batch_size`); traceable."""
