@@ -35,9 +35,12 @@ def _results(out: Path) -> list[Path]:
 
 def test_killed_sweep_resumes_without_redoing_work(tmp_path):
     out = tmp_path / "sweep"
-    cmd = [sys.executable, "-m", "brdffit.cli", "sweep", str(out), "--synthetic", "6"]
-    cmd += ["--models", "lambert,walter", "--metrics", "low_e2", "--stride", "15", "15", "15"]
-    cmd += ["--restarts", "0", "--jobs", "2", "--no-progress"]
+    # one model on four materials, in the command's own process (--jobs 1): run_sweep's
+    # `record` writes every result with or without Dask, and a lost Dask worker is
+    # test_cluster's; a LocalCluster here only added two workers' start and compilation
+    cmd = [sys.executable, "-m", "brdffit.cli", "sweep", str(out), "--synthetic", "4"]
+    cmd += ["--models", "walter", "--metrics", "low_e2", "--stride", "15", "15", "15"]
+    cmd += ["--restarts", "0", "--jobs", "1", "--no-progress"]
     # eval_n is not a CLI option; the in-process resume below must match the default
     proc = subprocess.Popen(cmd, cwd=ROOT, start_new_session=True, stderr=subprocess.DEVNULL)
     deadline = time.monotonic() + 240
@@ -48,30 +51,30 @@ def test_killed_sweep_resumes_without_redoing_work(tmp_path):
         os.killpg(proc.pid, signal.SIGKILL)
         proc.wait()
     before = _results(out)
-    assert 0 < len(before) < 12, "the kill must land between the first and the last result"
+    assert 0 < len(before) < 4, "the kill must land between the first and the last result"
     for p in out.rglob("*.json"):
         json.loads(p.read_text())  # nothing partial or corrupt
     stats = {p: (p.stat().st_ino, p.stat().st_mtime_ns) for p in before}
 
     s = run_sweep(
         out,
-        synthetic_materials(6),
-        ["lambert", "walter"],
+        synthetic_materials(4),
+        ["walter"],
         ["low_e2"],
         stride=(15, 15, 15),
         n_restarts=0,
         jobs=1,
         progress=False,
     )
-    assert s.n_tasks == 12 and s.n_skipped == len(before) and s.n_errors == 0
+    assert s.n_tasks == 4 and s.n_skipped == len(before) and s.n_errors == 0
     after = _results(out)
-    assert len(after) == 12 and not list(out.rglob("*.tmp"))
+    assert len(after) == 4 and not list(out.rglob("*.tmp"))
     assert {p: (p.stat().st_ino, p.stat().st_mtime_ns) for p in before} == stats
     d = json.loads(after[0].read_text())
     assert d["eval_ns_per_sample"] > 0 and d["family"] and d["material"] == after[0].parent.name
     assert d["provenance"]["backend"] == "cpu" and d["provenance"]["brdffit"]
     man = json.loads((out / "sweep.json").read_text())
-    assert len(man["materials"]) == 6 and list(man["models"]) == ["lambert", "walter"]
+    assert len(man["materials"]) == 4 and list(man["models"]) == ["walter"]
 
 
 def test_failures_are_recorded_and_the_sweep_goes_on(tmp_path):
