@@ -2,22 +2,26 @@
 
 Issue 28, item 2: every model should fit every material on the full MERL grid
 (1,458,000 cells; those inside the 80-degree cut are fitted) within 4 GB and 60 s warm.
-Each cell of the table is one subprocess (so its peak memory is its own): it reads the
-material (cached once per material as a pickle of the :class:`~brdffit.Measurements`, so
-the NBRDF network is evaluated once), runs ``brdffit.fit(model, data, metric)`` with its
-defaults twice, and reports the status of the second (warm) fit, its steps, loss and wall
-time, the first call's time (compile included) and the process's peak resident memory
-(``ru_maxrss``: data, compiled code and the fit's arrays together). A cell that runs past
-``--timeout`` seconds is killed and recorded as such.
+Each (model, metric) pair is one subprocess, so compilation is paid once per pair as a
+user fitting many materials pays it: it reads the materials (cached once each as a pickle
+of the :class:`~brdffit.Measurements`, so the NBRDF network is evaluated once), fits the
+first material once cold (``first s``: compilation included), then runs
+``brdffit.fit(model, data, metric)`` with its defaults on every material warm (all have
+the same grid, so the compiled code is reused) and reports each warm fit's status, steps,
+loss and wall time, the process's peak resident memory so far (``ru_maxrss``: data,
+compiled code and the fit's arrays together; an upper bound for the row's own fit) and
+the 1-minute load average of the box when the fit ended (2 cores: above 2 the times are
+stretched by other work). A pair that runs past ``--timeout`` seconds is killed and its
+missing rows are recorded as such.
 
 Run (nice: the box is shared):
     nice python3 benchmarks/full_resolution.py [--models sgd low ...] [--metrics low_e2 ngan]
         [--materials chrome-steel blue-metallic-paint green-plastic beige-fabric]
-        [--timeout 900] [--out /tmp/brdffit_full_resolution/rows.jsonl]
+        [--timeout 1800] [--out /tmp/brdffit_full_resolution/rows.jsonl]
 
-Rows are appended to ``--out`` as JSON lines as they finish (a rerun skips cells already
-there), and the markdown table of every row so far is printed at the end. The NBRDF
-files are read from ``$BRDFFIT_NBRDF`` (default ``/work/shared/data/merl_nbrdf``).
+Rows are appended to ``--out`` as JSON lines as their pair finishes (a rerun skips pairs
+already there), and the markdown table of every row so far is printed at the end. The
+NBRDF files are read from ``$BRDFFIT_NBRDF`` (default ``/work/shared/data/merl_nbrdf``).
 
 Latest figures: benchmarks/results/full_resolution.md.
 """
@@ -55,54 +59,69 @@ def cached(material: str) -> Path:
     return path
 
 
-def one_cell(model_name: str, metric: str, material: str) -> dict:
-    """Fit once cold and once warm in this process; the row of the table."""
+def one_pair(model_name: str, metric: str, materials: list[str]) -> list[dict]:
+    """Fit the first material cold, then every material warm, in this process; the rows."""
     from brdffit import fit, models
 
-    data = pickle.loads(cached(material).read_bytes())
     model = models.get(model_name)
+    data = {m: pickle.loads(cached(m).read_bytes()) for m in materials}
     t0 = time.perf_counter()
-    fit(model, data, metric, throw=False)
+    fit(model, data[materials[0]], metric, throw=False)
     first = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    r = fit(model, data, metric, throw=False)
-    warm = time.perf_counter() - t0
-    return {
-        "model": model_name,
-        "metric": metric,
-        "material": material,
-        "status": r.status.name,
-        "steps": r.n_steps,
-        "loss": r.loss,
-        "first_s": first,
-        "warm_s": warm,
-        "peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
-        "n_data": r.n_data,
-    }
+    rows = []
+    for material in materials:
+        t0 = time.perf_counter()
+        r = fit(model, data[material], metric, throw=False)
+        warm = time.perf_counter() - t0
+        row = {
+            "model": model_name,
+            "metric": metric,
+            "material": material,
+            "status": r.status.name,
+            "steps": r.n_steps,
+            "loss": r.loss,
+            "warm_s": warm,
+            "peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
+            "load": os.getloadavg()[0],
+            "n_data": r.n_data,
+        }
+        if material == materials[0]:
+            row["first_s"] = first
+        rows.append(row)
+        print(json.dumps(row), flush=True)
+    return rows
 
 
-def run_cell(model_name: str, metric: str, material: str, timeout: float) -> dict:
-    """:func:`one_cell` in a subprocess; a crash or a timeout becomes a row too."""
-    cmd = [sys.executable, __file__, "--cell", model_name, metric, material]
-    row = {"model": model_name, "metric": metric, "material": material}
+def run_pair(model_name: str, metric: str, materials: list[str], timeout: float) -> list[dict]:
+    """:func:`one_pair` in a subprocess; a crash or a timeout becomes rows too."""
+    cmd = [sys.executable, __file__, "--pair", model_name, metric, *materials]
     t0 = time.perf_counter()
     try:
         out = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout)
-    except subprocess.TimeoutExpired:
-        return row | {"status": f"KILLED after {timeout:.0f} s"}
-    last = out.stdout.strip().splitlines()[-1:] or [""]
-    if out.returncode != 0 or not last[0].startswith("{"):
-        err = (out.stderr.strip().splitlines() or ["?"])[-1][:160]
-        return row | {"status": f"ERROR rc={out.returncode}: {err}",
-                      "first_s": time.perf_counter() - t0}  # fmt: skip
-    return json.loads(last[0])
+        stdout, why = out.stdout, None
+        if out.returncode != 0:
+            err = (out.stderr.strip().splitlines() or ["?"])[-1][:160]
+            why = f"ERROR rc={out.returncode}: {err}"
+    except subprocess.TimeoutExpired as e:
+        stdout = e.stdout.decode() if isinstance(e.stdout, bytes) else (e.stdout or "")
+        why = f"KILLED after {timeout:.0f} s"
+    rows = {}
+    for line in stdout.splitlines():
+        if line.startswith("{"):
+            r = json.loads(line)
+            rows[r["material"]] = r
+    missing = {"status": why, "first_s": time.perf_counter() - t0}
+    return [
+        rows.get(m) or {"model": model_name, "metric": metric, "material": m} | missing
+        for m in materials
+    ]
 
 
 def table(rows: list[dict]) -> str:
     """Markdown table of the rows (model, metric, material order as given)."""
     lines = [
-        "| model | metric | material | status | steps | warm s | first s | peak MB | loss |",
-        "|---|---|---|---|---|---|---|---|---|",
+        "| model | metric | material | status | steps | warm s | first s | peak MB | load | loss |",
+        "|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
 
@@ -112,7 +131,7 @@ def table(rows: list[dict]) -> str:
         lines.append(
             f"| {r['model']} | {r['metric']} | {r['material']} | {r['status']} | "
             f"{num('steps', '{}')} | {num('warm_s', '{:.1f}')} | {num('first_s', '{:.1f}')} | "
-            f"{num('peak_mb', '{:.0f}')} | {num('loss', '{:.4g}')} |"
+            f"{num('peak_mb', '{:.0f}')} | {num('load', '{:.1f}')} | {num('loss', '{:.4g}')} |"
         )
     return "\n".join(lines)
 
@@ -121,15 +140,15 @@ def main() -> None:
     from brdffit import models
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--cell", nargs=3, metavar=("MODEL", "METRIC", "MATERIAL"))
+    ap.add_argument("--pair", nargs="+", metavar="MODEL METRIC MATERIAL")
     ap.add_argument("--models", nargs="+", default=models.available())
     ap.add_argument("--metrics", nargs="+", default=list(METRICS))
     ap.add_argument("--materials", nargs="+", default=list(MATERIALS))
-    ap.add_argument("--timeout", type=float, default=900.0)
+    ap.add_argument("--timeout", type=float, default=1800.0)
     ap.add_argument("--out", default=str(CACHE / "rows.jsonl"))
     args = ap.parse_args()
-    if args.cell:
-        print(json.dumps(one_cell(*args.cell)), flush=True)
+    if args.pair:
+        one_pair(args.pair[0], args.pair[1], args.pair[2:])
         return
     out = Path(args.out)
     done = {}
@@ -141,15 +160,14 @@ def main() -> None:
         cached(material)
     rows = []
     for name in args.models:
-        for material in args.materials:
-            for metric in args.metrics:
-                key = (name, metric, material)
-                if key not in done:
-                    done[key] = run_cell(name, metric, material, args.timeout)
+        for metric in args.metrics:
+            if any((name, metric, m) not in done for m in args.materials):
+                for r in run_pair(name, metric, args.materials, args.timeout):
+                    done[(name, metric, r["material"])] = r
                     with out.open("a") as f:
-                        f.write(json.dumps(done[key]) + "\n")
-                    print(table([done[key]]).splitlines()[-1], flush=True)
-                rows.append(done[key])
+                        f.write(json.dumps(r) + "\n")
+                    print(table([r]).splitlines()[-1], flush=True)
+            rows += [done[(name, metric, m)] for m in args.materials]
     print(table(rows))
 
 

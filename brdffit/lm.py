@@ -24,9 +24,9 @@ over the box ``lo <= z <= hi``. Each iteration tries one step:
    Gauss-Newton step overshoots, ``lambda`` grows and the descent crawls. A secant
    estimate of ``S`` is kept from the gradients of accepted steps: sized by
    ``min(1, |s.y#| / |s.S.s|)``, then the Dennis-Gay-Welsch update with
-   ``y# = g+ - g - H+ s`` (NL2SOL's ``(J+ - J)^T r+`` needs the last Jacobian, n x k
-   floats; ours agrees with it to first order in ``s``, the structured secant of
-   Dennis & Walker 1981), skipped unless ``y.s > 0``. Which model makes the step: the
+   ``y# = g+ - g - H+ s`` (NL2SOL's ``(J+ - J)^T W r+`` needs the last Jacobian, n x k
+   floats; the two differ by ``J^T W (r+ - r) - H+ s``, second order in ``s``),
+   skipped unless ``y.s > 0``. Which model makes the step: the
    Gauss-Newton one after an accepted step that lowered the cost by a fifth or more
    (Fletcher & Xu 1987, whose hybrid uses ``eps = 0.2``: Gauss-Newton is then
    converging as on a small-residual problem); otherwise NL2SOL's adaptive rule, by
