@@ -15,6 +15,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from scipy.optimize import least_squares
 
 from brdffit import lm, metrics, models, synthesize
@@ -154,3 +156,21 @@ def test_large_residual_problems_reach_the_published_minimum_without_crawling(fn
     half_unit = 0.5 * 10.0 ** -len(published.split(".")[1])
     assert abs(2 * float(d.cost) - float(published)) <= half_unit, 2 * float(d.cost)
     assert int(d.steps) <= 100, int(d.steps)
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.integers(0, 2**31 - 1), st.integers(1, 6))
+def test_the_secant_update_meets_its_secant_condition(seed, k):
+    # Dennis-Gay-Welsch: the updated S is symmetric and maps the step to y# = g+ - g - H+ s
+    # (after sizing); a step with y.s <= 0 leaves S as it was.
+    rng = np.random.default_rng(seed)
+    a = rng.normal(size=(k, k))
+    curv, h1 = a + a.T, a @ a.T + np.eye(k)
+    sz, g0 = rng.normal(size=k), rng.normal(size=k)
+    g1 = g0 + (h1 + np.eye(k)) @ sz  # y = g1 - g0 with y.s > 0
+    new = np.asarray(lm._secant(*(jnp.asarray(v) for v in (curv, sz, g0, g1, h1))))
+    np.testing.assert_allclose(new, new.T, atol=1e-12)
+    np.testing.assert_allclose(new @ sz, g1 - g0 - h1 @ sz, rtol=1e-9, atol=1e-9)
+    g1 = g0 - (h1 + np.eye(k)) @ sz  # y.s < 0: no update
+    same = np.asarray(lm._secant(*(jnp.asarray(v) for v in (curv, sz, g0, g1, h1))))
+    np.testing.assert_array_equal(same, curv)
