@@ -110,7 +110,7 @@ def run_pair(model_name: str, metric: str, materials: list[str], timeout: float)
         if line.startswith("{"):
             r = json.loads(line)
             rows[r["material"]] = r
-    missing = {"status": why, "first_s": time.perf_counter() - t0}
+    missing = {"status": why or "ERROR: no row printed", "first_s": time.perf_counter() - t0}
     return [
         rows.get(m) or {"model": model_name, "metric": metric, "material": m} | missing
         for m in materials
