@@ -137,7 +137,8 @@ def test_distributions_integrate_to_one(b, c):
 def test_a_long_tailed_peak_is_fitted_without_crawling_along_bc():
     # blue-metallic-paint's optimum (B 7.6, C 7.3): in (ln B, ln C) the descent slid
     # along B C = const (48 LM steps here under ngan, 78 on the measured material at
-    # stride 5 5 9, low_e2); in (ln BC, 1/C) it takes 21 here and 21 on the material
+    # stride 5 5 9, low_e2); in (ln BC, 1/C) it takes 21 here and 21 on the material (15
+    # there with the solver's secant term, lm.py item 5; same loss)
     m = models.get("low")
     truth = m.defaults() | {"kd": [0.02, 0.03, 0.08], "ks": [0.3, 0.35, 0.5], "B": 7.6, "C": 7.3}
     truth = {k: jnp.asarray(v, float) for k, v in truth.items()} | {"eta": jnp.asarray(10.0)}
