@@ -4,8 +4,8 @@
 
 1. the candidates of :mod:`brdffit.starts` (the cross-metric start among them) are
    descended by the bounded Levenberg-Marquardt of :mod:`brdffit.lm`, all in one
-   compiled call (:func:`brdffit.lm.batch_size`), on every k-th sample (at most
-   ``coarse`` of them);
+   compiled call (:func:`brdffit.lm.batch_size`), on evenly thinned samples when the
+   data are large (:func:`coarse_size`);
 2. the lowest is finished on all samples;
 3. with a robust loss, its scale is set from the plain optimum's residuals, and the
    plain optimum and every candidate are descended again under the robust loss (outliers
@@ -50,6 +50,18 @@ evenly thinned MERL data keep every theta_h row (its order is theta_h-major and 
 stride below 180 keeps every row: 36 for the full grid's 909,696 cells), so a
 near-mirror peak stays sampled. 50,000 (the old fitter's) spent 0.45 s more of a 2.4 s
 full-resolution walter fit under ngan, with the same answer."""
+
+COARSE_FLOOR = 2_000
+"""Fewest thinned samples the starts descend on: the stress suite (2,000 random samples
+per case) recovers every identifiable case from that many."""
+
+COARSE_SHARE = 4
+"""Below ``COARSE`` the starts see one sample in ``COARSE_SHARE`` (at least
+``COARSE_FLOOR``): some twenty start descents cost a descent on all samples or more, so
+on mid-sized data (a strided MERL grid, 5,000 to 100,000 samples) they, not the answer's
+descent, set the fit's time. Walter at 20,234 samples, warm: 1.36 s with the starts on
+all samples, 0.46 s on a quarter, 0.31 s on 2,000; the same final loss to 4e-16 in all
+three (``benchmarks/results/fit_lm.md``)."""
 
 _STATUS = {
     lm.Reason.GTOL: Status.CONVERGED,
@@ -103,9 +115,10 @@ def fit(
       residuals against outliers; ``robust_scale`` (residual units) defaults to the
       tuning constant (1.345 Huber, 2.385 Cauchy) times 1.4826 MAD of the plain
       optimum's residuals. The reported ``loss`` stays the metric's own value.
-    - ``coarse``: the starts run on every k-th sample, at most ``coarse`` of them, and
+    - ``coarse``: the starts run on every k-th sample, at most ``coarse`` of them (and
+      at most a ``COARSE_SHARE``-th of the samples, but not under ``COARSE_FLOOR``), and
       the best one is then finished on all samples (``None``: starts on all samples).
-      Only data with more than twice ``coarse`` samples are thinned.
+      Data are thinned only when that at least halves them (:func:`coarse_size`).
     - ``throw``: raise :class:`FitError` (carrying the result) if the fit did not converge.
 
     Returns a :class:`FitResult`; a non-finite or unfinished fit is never marked converged.
@@ -249,8 +262,9 @@ class _Engine:
     def run(self, preps: list[metrics_mod.Prepared], first: dict) -> list[Outcome]:
         s, obj = self.s, self.obj
         n_problems = len(preps)
-        small = [_subset(p, s.coarse) for p in preps]
-        osmall = [_subset(o, s.coarse, like=sm) for o, sm in zip(self.others, small, strict=True)]
+        n_coarse = coarse_size(preps[0].n, s.coarse)
+        small = [_subset(p, n_coarse) for p in preps]
+        osmall = [_subset(o, n_coarse, like=sm) for o, sm in zip(self.others, small, strict=True)]
         thinned = small[0] is not preps[0]
         near, spread = starts.draws(
             obj.layout, first, n_restarts=s.n_restarts, screen=s.screen,
@@ -397,16 +411,29 @@ def _stack(preps: list[metrics_mod.Prepared]) -> metrics_mod.Prepared:
     return jax.tree.map(lambda *a: jnp.stack(a), *preps)
 
 
+def coarse_size(n: int, coarse: int | None) -> int | None:
+    """How many of ``n`` samples the starts descend on; ``None``: all of them.
+
+    ``min(coarse, max(COARSE_FLOOR, n // COARSE_SHARE))``, and ``None`` when that would
+    not halve the data (thinning then saves less than the extra finishing descent costs).
+    ``coarse=None`` turns thinning off.
+    """
+    if coarse is None:
+        return None
+    k = min(coarse, max(COARSE_FLOOR, n // COARSE_SHARE))
+    return k if n > 2 * k else None
+
+
 def _subset(
     prep: metrics_mod.Prepared, n: int | None, like: metrics_mod.Prepared | None = None
 ) -> metrics_mod.Prepared:
-    """Every k-th kept sample so that at most ``n`` remain (``prep`` itself if no thinning).
+    """``n`` kept samples evenly spaced (``prep`` itself when ``n`` is ``None``).
 
     ``like``: the same data thinned already under another metric; its geometry and
     cosines are shared (target, weight and values are the metric's own: a log metric
     leaves out channels a linear one fits, :func:`brdffit.metrics.channels_used`).
     """
-    if n is None or prep.n <= 2 * n:
+    if n is None:
         return prep
     idx = jnp.asarray(np.linspace(0, prep.n - 1, n).round().astype(np.int64))
     if like is None:

@@ -263,3 +263,30 @@ def test_thinned_starts_keep_each_metrics_own_values():
     idx = np.linspace(0, log.n - 1, 40).round().astype(int)
     np.testing.assert_array_equal(small_log.values, np.asarray(log.values)[idx])
     np.testing.assert_array_equal(small_log.weight, np.asarray(log.weight)[idx])
+
+
+@pytest.mark.parametrize(
+    ("n", "coarse", "want"),
+    [
+        (1_252, 25_000, None),  # small data: the starts see every sample
+        (4_000, 25_000, None),  # the floor would not halve them
+        (7_288, 25_000, 2_000),  # the floor
+        (20_234, 25_000, 5_058),  # a quarter
+        (909_696, 25_000, 25_000),  # full MERL grid: the cap
+        (20_234, 1_000, 1_000),  # the caller's own cap wins
+        (20_234, None, None),  # thinning off
+    ],
+)
+def test_the_starts_thin_mid_sized_data_to_a_quarter(n, coarse, want):
+    from brdffit.fit import coarse_size
+
+    assert coarse_size(n, coarse) == want
+
+
+def test_a_fit_on_mid_sized_data_runs_its_starts_on_a_quarter_of_the_samples(walter):
+    # 7,288 samples: the starts descend on 2,000 of them, the answer on all, and it is
+    # the answer of the starts run on every sample (same cost to 1e-9 relative).
+    data = synthesize(walter, TRUTH, stride=GRID, noise_mult=0.02, seed=2)
+    thin, full = fit(walter, data), fit(walter, data, coarse=None)
+    assert thin.coarse_samples == 2_000 and full.coarse_samples == 0
+    assert abs(thin.loss - full.loss) <= 1e-9 * full.loss
