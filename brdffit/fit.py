@@ -3,9 +3,9 @@
 :func:`fit` and :func:`fit_many` run the same engine:
 
 1. the candidates of :mod:`brdffit.starts` (the cross-metric start among them) are
-   descended by the bounded Levenberg-Marquardt of :mod:`brdffit.lm`, all in one
-   compiled call (:func:`brdffit.lm.batch_size`), on evenly thinned samples when the
-   data are large (:func:`coarse_size`);
+   descended by the bounded Levenberg-Marquardt of :mod:`brdffit.lm`, raced by
+   successive halving in one compiled call (:func:`brdffit.lm.race`), on evenly
+   thinned samples when the data are large (:func:`coarse_size`);
 2. the lowest is finished on all samples;
 3. with a robust loss, its scale is set from the plain optimum's residuals, and the
    plain optimum and every candidate are descended again under the robust loss (outliers
@@ -349,7 +349,7 @@ class _Engine:
         if z.shape[0] == 1:
             o = obj.with_robust(obj.robust, obj.scale[0]) if obj.scale.ndim else obj
             if z.ndim == 3:
-                d = lm.solve_starts(o, z[0], preps[0], self.lo, self.hi, self.tol, batch)
+                d = lm.race_one(o, z[0], preps[0], self.lo, self.hi, self.tol, batch)
             else:
                 d = lm.solve_one(o, z[0], preps[0], self.lo, self.hi, self.tol)
             return jax.tree.map(lambda a: a[None], d)
@@ -399,7 +399,7 @@ def _solve_many(obj, z, prep, lo, hi, tol, batch):
         scale, zz, p = args
         o = obj.with_robust(obj.robust, scale) if per_scale else obj
         if zz.ndim == 2:
-            return lm.solve_batch(o, zz, p, lo, hi, tol, batch)
+            return lm.race(o, zz, p, lo, hi, tol, batch)
         return lm.solve(o, zz, p, lo, hi, tol)
 
     scales = obj.scale if per_scale else jnp.zeros(z.shape[0])

@@ -17,8 +17,9 @@ The candidates, in order (every one with its affine parameters solved, see
 
 :func:`draws` makes the candidates (they depend on the seed only); :func:`select` solves
 their affine parameters on one problem's data and keeps the screen's cheapest.
-:func:`brdffit.fit` descends all of them together (one compiled solve) on thinned
-samples and finishes the best on all samples.
+:func:`brdffit.fit` races their descents (successive halving, :func:`brdffit.lm.race`;
+one compiled solve) on thinned samples and finishes the best on all samples; the
+cross-metric start's candidates are raced the same way under the other metric.
 """
 
 from __future__ import annotations

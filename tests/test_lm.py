@@ -174,3 +174,37 @@ def test_the_secant_update_meets_its_secant_condition(seed, k):
     g1 = g0 - (h1 + np.eye(k)) @ sz  # y.s < 0: no update
     same = np.asarray(lm._secant(*(jnp.asarray(v) for v in (curv, sz, g0, g1, h1))))
     np.testing.assert_array_equal(same, curv)
+
+
+@settings(max_examples=50, deadline=None)
+@given(st.integers(1, 40), st.integers(1, 600))
+def test_successive_halving_keeps_a_third_with_three_times_the_steps(n_starts, max_steps):
+    sched = lm.rungs(n_starts, max_steps)
+    keeps, budgets = [k for k, _ in sched], [b for _, b in sched]
+    assert keeps[0] == n_starts and budgets[-1] == max_steps
+    assert budgets[0] == (lm.RUNG_STEPS if len(sched) > 1 else max_steps)
+    for (k0, b0), (k1, b1) in zip(sched, sched[1:], strict=False):
+        assert k1 == -(-k0 // lm.RUNG_GROWTH)
+        assert b1 == (lm.RUNG_GROWTH * b0 if b1 < max_steps else max_steps) and b1 > b0
+    # the race ends with one start, unless the step budget ran out first
+    assert keeps[-1] == 1 or budgets[-1] == max_steps
+
+
+def test_the_lowest_raced_start_descends_as_it_would_alone():
+    # Brown and Dennis's function from starts spread over a wide box: the race drops the
+    # costlier ones at each rung; the one it keeps must end where its own descent ends,
+    # step for step, and every dropped one must have stopped within its rung's budget.
+    rng = np.random.default_rng(0)
+    z0 = jnp.asarray(np.array([25.0, 5.0, -5.0, -1.0]) + rng.normal(0, 10, (7, 4)))
+    inf, tol = jnp.full(4, jnp.inf), lm.Tolerances()
+    problem = _LeastSquares(_brown_dennis)
+    d = lm.race_one(problem, z0, None, -inf, inf, tol, None)
+    best = int(np.argmin(np.asarray(d.cost)))
+    alone = lm.solve_one(problem, z0[best], None, -inf, inf, tol)
+    assert lm.Reason(int(d.reason[best])).converged
+    assert int(d.steps[best]) == int(alone.steps)
+    np.testing.assert_allclose(float(d.cost[best]), float(alone.cost), rtol=1e-12)
+    sched = lm.rungs(7, tol.max_steps)
+    dropped = np.asarray(d.reason) == lm.Reason.RUNNING
+    assert dropped.sum() >= 7 - sched[1][0]  # the first cut dropped 4 of 7
+    assert np.all(np.asarray(d.steps)[dropped] <= sched[-2][1])
