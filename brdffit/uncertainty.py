@@ -125,8 +125,11 @@ def conditioning(jtj: np.ndarray) -> tuple[float, str | None, np.ndarray]:
 
     Returns (condition, reason, weak): ``reason`` is None when ``J^T J`` can be inverted;
     ``weak`` flags the scalars that carry the near-null directions of the column-scaled
-    ``J^T J`` (eigenvalues below :data:`NULL_EIGEN` of the largest; a component above 0.3
-    of the unit eigenvector), i.e. the parameters the data do not identify on their own.
+    ``J^T J`` (eigenvalues below :data:`NULL_EIGEN` of the largest), i.e. the parameters
+    the data do not identify on their own: those with more than half of their variance
+    on those directions (Belsley, Kuh & Welsch 1980, "Regression Diagnostics", ch. 3,
+    variance-decomposition proportions). A scalar that moves along a null direction
+    has its variance there however small its share of the unit eigenvector.
     """
     k = jtj.shape[0]
     weak = np.zeros(k, bool)
@@ -140,7 +143,9 @@ def conditioning(jtj: np.ndarray) -> tuple[float, str | None, np.ndarray]:
     ev, vec = np.linalg.eigh(jtj / np.outer(d, d))
     cond = float(ev[-1] / ev[0]) if ev[0] > 0 else float("inf")
     small = ev < NULL_EIGEN * ev[-1]
-    weak = np.any(np.abs(vec[:, small]) > 0.3, axis=1) if small.any() else weak
+    if small.any():  # var(z_j) = sum_i v_ji^2 / ev_i, an eigenvalue no smaller than eps
+        phi = vec**2 / np.maximum(ev, np.finfo(float).eps * ev[-1])
+        weak = phi[:, small].sum(axis=1) > 0.5 * phi.sum(axis=1)
     if not np.isfinite(cond) or cond > SINGULAR:
         return cond, f"J^T J is singular to working precision (condition {cond:.3g})", weak
     return cond, None, weak
