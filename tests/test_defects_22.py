@@ -28,7 +28,7 @@ from brdffit.objective import Objective, all_losses, freeze_map
 from brdffit.pareto import error_vs_time, pareto_figure
 from brdffit.report import write_report
 from brdffit.result import FitResult, per_sample, value_text
-from brdffit.uncertainty import Outcome, assemble, covariance, unidentified
+from brdffit.uncertainty import Outcome, assemble, conditioning, covariance, unidentified
 from tests.sweep_fixtures import make_sweep
 
 
@@ -369,3 +369,17 @@ def test_rank_matrix_labels_stay_inside_the_canvas(long_labels):
 
 def test_pareto_labels_stay_inside_the_canvas_and_apart(long_labels):
     assert _texts_outside(pareto_figure(error_vs_time(long_labels, "low_e2"))) == []
+
+
+def test_every_scalar_that_moves_along_a_null_direction_is_named():
+    # J's columns 0-2 are dependent along v; column 3 is free of it. Scalar 2 moves little
+    # along v (8% of the unit vector, under the old rule's 0.3), yet the data fix it no
+    # better than the others: all of its variance lies on that direction.
+    rng = np.random.default_rng(3)
+    v = np.array([1.0, 0.3, 0.08, 0.0])
+    v /= np.linalg.norm(v)
+    a = rng.normal(size=(60, 4))
+    a -= np.outer(a @ v, v)  # J v = 0
+    cond, reason, weak = conditioning(a.T @ a)
+    assert reason is not None and cond > 1e15
+    assert weak.tolist() == [True, True, True, False]
