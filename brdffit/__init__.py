@@ -45,7 +45,7 @@ def enable_compilation_cache(path: str | None = None) -> None:
     jax.config.update("jax_compilation_cache_dir", folder)
     # every program, however quick to compile: a fit runs some 100 small ones (start
     # draws, affine solves), 20-30 ms each to compile and far less to load; with a 0.2 s
-    # floor a fresh process compiled 93 of them again, 2.4 s of a 7.7 s first fit
+    # floor a fresh process compiled 93 of them again, 2.4 s of an 8.5 s first fit
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
     jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
 
