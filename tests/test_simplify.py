@@ -41,8 +41,45 @@ def _walter_data(f0, seed: int):
 def coloured_reduction() -> Reduction:
     # screen=8: the start model's fit needs fewer screened starts on this easy problem.
     # The start has no diffuse term already (the data have none): 11 variants compiled
-    # from plain walter, fewer from here; the slow test below takes the diffuse term away
+    # from plain walter, fewer from here. 43-92 s on 2 cores: its two tests are slow; the
+    # Lambert reductions below keep the same checks in the default suite.
     return simplify(NO_DIFFUSE, _walter_data([0.9, 0.6, 0.3], seed=3), screen=8)
+
+
+@pytest.fixture(scope="module")
+def lambert_reductions() -> dict[str, Reduction]:
+    """Lambert reduced from grey and from coloured albedo data (one variant, grey kd; 11 s
+    on 2 cores, nearly all compilation, which the second search reuses)."""
+    lam = models.get("lambert")
+    out = {}
+    for name, kd in (("grey", 0.5), ("coloured", [0.9, 0.6, 0.3])):
+        data = synthesize(lam, {"kd": kd}, stride=STRIDE, noise_mult=0.05, seed=3)
+        out[name] = simplify(lam, data, screen=8)
+    return out
+
+
+def test_a_feature_the_data_lack_goes_and_the_reduction_tables_plots_and_saves(
+    lambert_reductions,
+):
+    r = lambert_reductions["grey"]
+    md = r.table("markdown")
+    assert "| lambert |" in md and "t > 2.13" in md and "| grey kd |" in md
+    assert r.chosen == "lambert[grey=kd]" and np.shape(r.result.params["kd"]) == ()
+    assert r.result.params["kd"] == pytest.approx(0.5, rel=0.01)
+    ax = r.plot()  # every variant, the path, the chosen star
+    assert ax.get_xlabel() == "free parameters" and len(ax.lines) == 3
+    d = json.loads(r.to_json())
+    assert d["start"] == "lambert" and d["chosen"] == "lambert[grey=kd]"
+    assert d["removed"] == ["grey kd"] and d["kept"] == []
+    assert [row["decision"] for row in d["path"]] == ["start", "chosen"]
+    assert r.criterion == "cv" and r.folds == 5 and 0 < r.cost_ratio < math.inf
+
+
+def test_a_colour_the_data_have_stays(lambert_reductions):
+    r = lambert_reductions["coloured"]
+    assert r.chosen == "lambert" and r.to_dict()["kept"] == ["RGB kd"]
+    assert [row.decision for row in r.path] == ["chosen", "kept"]
+    np.testing.assert_allclose(r.result.params["kd"], [0.9, 0.6, 0.3], rtol=0.01)
 
 
 @pytest.mark.slow  # 32 s; the walter reductions below keep simplify in the default suite
@@ -78,6 +115,7 @@ def test_walter_without_diffuse_finds_the_generating_variant():
     assert 0 < r.cost_ratio < math.inf
 
 
+@pytest.mark.slow  # the fixture's 43-92 s; the Lambert tests above check the same
 def test_reduction_table_plot_and_json(coloured_reduction):
     r = coloured_reduction
     md = r.table("markdown")
@@ -96,6 +134,7 @@ def test_reduction_table_plot_and_json(coloured_reduction):
     assert 0 < r.cost_ratio < math.inf
 
 
+@pytest.mark.slow  # the fixture's 43-92 s; a coloured Lambert albedo stays above
 def test_coloured_specular_keeps_its_colour(coloured_reduction):
     r = coloured_reduction
     print(r.table())
