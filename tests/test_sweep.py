@@ -35,11 +35,13 @@ def _results(out: Path) -> list[Path]:
 
 def test_killed_sweep_resumes_without_redoing_work(tmp_path):
     out = tmp_path / "sweep"
-    # one model on four materials, in the command's own process (--jobs 1): run_sweep's
+    # one model on six materials, in the command's own process (--jobs 1): run_sweep's
     # `record` writes every result with or without Dask, and a lost Dask worker is
-    # test_cluster's; a LocalCluster here only added two workers' start and compilation
-    cmd = [sys.executable, "-m", "brdffit.cli", "sweep", str(out), "--synthetic", "4"]
-    cmd += ["--models", "walter", "--metrics", "low_e2", "--stride", "15", "15", "15"]
+    # test_cluster's; a LocalCluster here only added two workers' start and compilation.
+    # Lambert: the cheapest model to compile (walter took 49 s here, nearly all of it
+    # compiling twice); each fit still writes its JSON and times its evaluation
+    cmd = [sys.executable, "-m", "brdffit.cli", "sweep", str(out), "--synthetic", "6"]
+    cmd += ["--models", "lambert", "--metrics", "low_e2", "--stride", "15", "15", "15"]
     cmd += ["--restarts", "0", "--jobs", "1", "--no-progress"]
     # eval_n is not a CLI option; the in-process resume below must match the default
     proc = subprocess.Popen(cmd, cwd=ROOT, start_new_session=True, stderr=subprocess.DEVNULL)
@@ -51,30 +53,30 @@ def test_killed_sweep_resumes_without_redoing_work(tmp_path):
         os.killpg(proc.pid, signal.SIGKILL)
         proc.wait()
     before = _results(out)
-    assert 0 < len(before) < 4, "the kill must land between the first and the last result"
+    assert 0 < len(before) < 6, "the kill must land between the first and the last result"
     for p in out.rglob("*.json"):
         json.loads(p.read_text())  # nothing partial or corrupt
     stats = {p: (p.stat().st_ino, p.stat().st_mtime_ns) for p in before}
 
     s = run_sweep(
         out,
-        synthetic_materials(4),
-        ["walter"],
+        synthetic_materials(6),
+        ["lambert"],
         ["low_e2"],
         stride=(15, 15, 15),
         n_restarts=0,
         jobs=1,
         progress=False,
     )
-    assert s.n_tasks == 4 and s.n_skipped == len(before) and s.n_errors == 0
+    assert s.n_tasks == 6 and s.n_skipped == len(before) and s.n_errors == 0
     after = _results(out)
-    assert len(after) == 4 and not list(out.rglob("*.tmp"))
+    assert len(after) == 6 and not list(out.rglob("*.tmp"))
     assert {p: (p.stat().st_ino, p.stat().st_mtime_ns) for p in before} == stats
     d = json.loads(after[0].read_text())
     assert d["eval_ns_per_sample"] > 0 and d["family"] and d["material"] == after[0].parent.name
     assert d["provenance"]["backend"] == "cpu" and d["provenance"]["brdffit"]
     man = json.loads((out / "sweep.json").read_text())
-    assert len(man["materials"]) == 4 and list(man["models"]) == ["walter"]
+    assert len(man["materials"]) == 6 and list(man["models"]) == ["lambert"]
 
 
 def test_failures_are_recorded_and_the_sweep_goes_on(tmp_path):
@@ -329,11 +331,12 @@ def test_sweep_on_dask_survives_a_killed_worker(tmp_path):
 
 def test_batched_sweep_gives_the_single_fits_answers(tmp_path):
     """--batch: one fit_many call per chunk of materials, the same results as one fit
-    each (the same start policy), and each file says its batch size."""
+    each (the same start policy), and each file says its batch size. Lambert: the
+    sweep's chunking is the subject (walter's batched fit is test_fit_many's)."""
     mats = synthetic_materials(3)
     kw = dict(ARGS, jobs=1, progress=False)
-    run_sweep(tmp_path / "one", mats, ["walter"], ["low_e2"], **kw)
-    run_sweep(tmp_path / "many", mats, ["walter"], ["low_e2"], **kw, batch=2)
+    run_sweep(tmp_path / "one", mats, ["lambert"], ["low_e2"], **kw)
+    run_sweep(tmp_path / "many", mats, ["lambert"], ["low_e2"], **kw, batch=2)
     one, many = _results(tmp_path / "one"), _results(tmp_path / "many")
     assert [p.relative_to(tmp_path / "one") for p in one] == [
         p.relative_to(tmp_path / "many") for p in many
@@ -347,4 +350,4 @@ def test_batched_sweep_gives_the_single_fits_answers(tmp_path):
         batches.append(rb["batch"])
     assert sorted(batches) == [1, 2, 2]
     with pytest.raises(SweepError, match="batch=0"):
-        run_sweep(tmp_path / "bad", mats, ["walter"], ["low_e2"], **kw, batch=0)
+        run_sweep(tmp_path / "bad", mats, ["lambert"], ["low_e2"], **kw, batch=0)
