@@ -77,12 +77,12 @@ def test_fit_with_a_spec_and_an_option(capsys, merl_file):
         "walter[distribution=beckmann]",
         "--option",
         "anisotropic=false",
-        "--restarts",
-        "0",
-        "--stride",
-        "15",
-        "15",
-        "15",
+        # the settings of the test above, whose model this spec names: one compiled fit
+        "--freeze",
+        "alpha=0.2",
+        "--metric",
+        "ngan",
+        *SMALL,
     )
     assert code == 0 and "walter(distribution='beckmann', " in out
 
