@@ -10,6 +10,11 @@ of ``+inf`` is an overflow, counted apart and allowed: the true value exceeds th
 dtype's range (``tests/test_model_precision.py`` holds every model to that in float64
 against a higher-precision reference), and a wrong small finite number would be worse.
 ``brdffit check`` prints the rows as a table (:func:`format_table`).
+
+Values and gradients are compiled (:func:`_values`, :func:`_gradients`), as the fitter
+runs them: one program per model, dtype and pair count serves every parameter set.
+Evaluated op by op, SGD's first check took 12.6 s (each operation of its quadrature
+compiled on its own), compiled 4 s; walter 3.4 s and 1.0 s.
 """
 
 from __future__ import annotations
@@ -17,6 +22,7 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -145,9 +151,21 @@ def _below_horizon_nonzero(model: AbstractModel, params: Mapping, wi, wo) -> int
     flip = jnp.asarray([[1.0, 1.0, -1.0]], wi.dtype)
     count = 0
     for a, b in ((wi, wo * flip), (wi * flip, wo)):
-        f = np.asarray(model.eval(params, a, b))
+        f = np.asarray(_values(model, params, a, b))
         count += int(np.sum(_rows_with(f != 0)))
     return count
+
+
+@eqx.filter_jit
+def _values(model: AbstractModel, params: Mapping, wi, wo) -> jax.Array:
+    """``model.eval``, compiled."""
+    return model.eval(params, wi, wo)
+
+
+@eqx.filter_jit
+def _gradients(model: AbstractModel, params: Mapping, wi, wo) -> dict[str, jax.Array]:
+    """Gradient of ``sum(f)`` over the pairs with respect to every parameter, compiled."""
+    return jax.grad(lambda p: jnp.sum(model.eval(p, wi, wo)))(params)
 
 
 def _nonfinite_grads(model: AbstractModel, params: Mapping, wi, wo) -> dict[str, int]:
@@ -155,7 +173,7 @@ def _nonfinite_grads(model: AbstractModel, params: Mapping, wi, wo) -> dict[str,
 
     ``wi``, ``wo``: the pairs to sum over (those with finite values).
     """
-    grads = jax.grad(lambda p: jnp.sum(model.eval(p, wi, wo)))(params)
+    grads = _gradients(model, dict(params), wi, wo)
     return {k: int(np.sum(~np.isfinite(np.asarray(g)))) for k, g in grads.items()}
 
 
@@ -171,7 +189,7 @@ def check_params(
     jdtype = DTYPES[dtype]
     wi, wo = (jnp.asarray(w, jdtype) for w in extreme_pairs())
     p = model.cast(params, jdtype)
-    f_arr = model.eval(p, wi, wo)
+    f_arr = _values(model, p, wi, wo)
     f = np.asarray(f_arr)
     finite = np.isfinite(f)
     overflow = _rows_with(f == np.inf)
