@@ -82,7 +82,7 @@ def test_a_colour_the_data_have_stays(lambert_reductions):
     np.testing.assert_allclose(r.result.params["kd"], [0.9, 0.6, 0.3], rtol=0.01)
 
 
-@pytest.mark.slow  # 32 s; the walter reductions below keep simplify in the default suite
+@pytest.mark.slow  # 32 s; the Lambert reductions above keep simplify in the default suite
 def test_lafortune_two_lobes_reduce_to_one_by_bic():
     # grey kd from the start: fewer variants to compile, and the drop of a lobe must carry
     # the grey option along (a lobe's grey name moves with the lobe)
