@@ -41,7 +41,7 @@ def _walter_data(f0, seed: int):
 def coloured_reduction() -> Reduction:
     # screen=8: the start model's fit needs fewer screened starts on this easy problem.
     # The start has no diffuse term already (the data have none): 11 variants compiled
-    # from plain walter, fewer from here. 43-92 s on 2 cores: its two tests are slow; the
+    # from plain walter, fewer from here. 52-92 s on 2 cores: its two tests are slow; the
     # Lambert reductions below keep the same checks in the default suite.
     return simplify(NO_DIFFUSE, _walter_data([0.9, 0.6, 0.3], seed=3), screen=8)
 
@@ -115,7 +115,7 @@ def test_walter_without_diffuse_finds_the_generating_variant():
     assert 0 < r.cost_ratio < math.inf
 
 
-@pytest.mark.slow  # the fixture's 43-92 s; the Lambert tests above check the same
+@pytest.mark.slow  # the fixture's 52-92 s; the Lambert tests above check the same
 def test_reduction_table_plot_and_json(coloured_reduction):
     r = coloured_reduction
     md = r.table("markdown")
@@ -134,7 +134,7 @@ def test_reduction_table_plot_and_json(coloured_reduction):
     assert 0 < r.cost_ratio < math.inf
 
 
-@pytest.mark.slow  # the fixture's 43-92 s; a coloured Lambert albedo stays above
+@pytest.mark.slow  # the fixture's 52-92 s; a coloured Lambert albedo stays above
 def test_coloured_specular_keeps_its_colour(coloured_reduction):
     r = coloured_reduction
     print(r.table())
