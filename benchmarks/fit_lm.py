@@ -148,27 +148,27 @@ def linear_start(layout, metric, data, keep, weight, g):
     return np.clip(x, layout.lo, layout.hi)
 
 
-def jax_peer(layout, model, metric, prep):
+def jax_peer(layout, model, prep):
     """Jitted residual and exact forward-mode Jacobian in natural units."""
     import jax
     import jax.numpy as jnp
 
     def res(x):
         p = layout.unpack(x)
-        return jax_residuals(metric, model.evaluate(p, prep.g), prep)
+        return jax_residuals(model.evaluate(p, prep.g), prep)
 
     f, j = jax.jit(res), jax.jit(jax.jacfwd(res))
     return (lambda x: np.asarray(f(jnp.asarray(x)))), (lambda x: np.asarray(j(jnp.asarray(x))))
 
 
-def floor(layout, model, metric, prep, x0, repeats):
+def floor(layout, model, prep, x0, repeats):
     """Seconds of one residual + Jacobian pass and one k x k Cholesky solve, warm."""
     import jax
     import jax.numpy as jnp
 
     def res(x):
         p = layout.unpack(x)
-        return jax_residuals(metric, model.evaluate(p, prep.g), prep)
+        return jax_residuals(model.evaluate(p, prep.g), prep)
 
     def one(x):
         r, jac = res(x), jax.jacfwd(res)(x)
@@ -186,14 +186,14 @@ def floor(layout, model, metric, prep, x0, repeats):
     return best
 
 
-def per_step(layout, model, metric_name, prep, x0, repeats, steps: int = 6) -> float:
+def per_step(layout, model, prep, x0, repeats, steps: int = 6) -> float:
     """Seconds per linearisation of brdffit's LM, ``steps`` tried steps from ``x0``."""
     import jax.numpy as jnp
 
     from brdffit import lm
     from brdffit.objective import Objective
 
-    obj = Objective.build(model, metric_name)
+    obj = Objective.build(model)
     z0 = obj.layout.solver_vector(layout.unpack(x0))
     lo, hi = (jnp.asarray(a) for a in obj.layout.solver_bounds())
     tol = lm.Tolerances(max_steps=steps, ftol=0.0, xtol=0.0, gtol=0.0)
@@ -263,7 +263,7 @@ def run_metric(name, model, data, repeats):
         f"loss rel. diff {(loss_ours - loss_sp) / loss_sp:+.2e}",
         flush=True,
     )
-    f_jax, j_jax = jax_peer(layout, model, metric, prep)
+    f_jax, j_jax = jax_peer(layout, model, prep)
     f_jax(x0), j_jax(x0)  # compile outside the clock
     t = time.perf_counter()
     box = (layout.lo, layout.hi)
@@ -275,8 +275,8 @@ def run_metric(name, model, data, repeats):
         f"ratio {t_sj / t_ours:5.2f}x  loss rel. diff {(loss_ours - loss_sj) / loss_sj:+.2e}",
         flush=True,
     )
-    t_floor = floor(layout, model, metric, prep, x0, repeats + 1)
-    t_step = per_step(layout, model, name, prep, x0, repeats + 1)
+    t_floor = floor(layout, model, prep, x0, repeats + 1)
+    t_step = per_step(layout, model, prep, x0, repeats + 1)
     print(
         f"{name:7s} floor (r + J + solve, full grid) {t_floor:6.3f} s; brdffit per step "
         f"{t_step:6.3f} s ({t_step / t_floor:4.2f}x the floor)",

@@ -157,7 +157,7 @@ def fit_many(
         require_measurements(d)
     m = metrics_mod.get_metric(metric)
     first = start_params(model, s.init)
-    obj = Objective.build(model, m, freeze_map(model, s.freeze, first))
+    obj = Objective.build(model, freeze_map(model, s.freeze, first))
     per = [metrics_mod.prepare_all(d, cut_deg=s.cut_deg) for d in datasets]
     sizes = {p[m.name].n for p in per}
     if len(sizes) > 1:
@@ -169,7 +169,7 @@ def fit_many(
     results = []
     for data, out, mine in zip(datasets, outcomes, per, strict=True):
         o = obj if out.robust_scale is None else obj.with_robust(s.robust, out.robust_scale)
-        r = assemble(o, out, mine, errors=s.errors, cut=s.cut_deg, source=data.source, t0=t0)
+        r = assemble(o, m, out, mine, errors=s.errors, cut=s.cut_deg, source=data.source, t0=t0)
         if s.throw and not r.converged:
             raise FitError(f"fit of {model.name} to {data.source}: {r.status.value}", r)
         results.append(r)
@@ -265,7 +265,8 @@ class _Engine:
         n_coarse = coarse_size(preps[0].n, s.coarse)
         small = [_subset(p, n_coarse) for p in preps]
         osmall = [_subset(o, n_coarse, like=sm) for o, sm in zip(self.others, small, strict=True)]
-        thinned = small[0] is not preps[0]
+        thinned, n_small = small[0] is not preps[0], small[0].n
+        small, osmall = _padded(small), _padded(osmall)
         near, spread = starts.draws(
             obj.layout, first, n_restarts=s.n_restarts, screen=s.screen,
             rng=np.random.default_rng(s.seed),
@@ -275,7 +276,7 @@ class _Engine:
         if len(spread):
             cross, extra = self._cross_metric_start(near, spread, small, osmall)
             zs = np.concatenate([zs, cross[:, None, :]], axis=1)
-        problems = _Problems(preps, small)
+        problems = _Problems(_padded(preps), small, thinned)
         rows = np.arange(n_problems)
         st = self._stage(obj, zs, problems)
         origin, steps = zs[rows, st.pick], st.steps
@@ -298,7 +299,7 @@ class _Engine:
                     z=st.z[i], status=status, binding=st.binding[i],
                     start=obj.params(jnp.asarray(origin[i])), n_steps=int(steps[i]),
                     n_starts=zs.shape[1],
-                    coarse=(small[i].n, int(coarse_steps[i])) if thinned else (0, 0),
+                    coarse=(n_small, int(coarse_steps[i])) if thinned else (0, 0),
                     robust_scale=scales[i],
                 )
             )  # fmt: skip
@@ -306,11 +307,18 @@ class _Engine:
 
     def _cross_metric_start(self, near, spread, small, osmall) -> tuple[np.ndarray, np.ndarray]:
         """Step 4 of :mod:`brdffit.starts`: per problem, the lowest descent of the
-        candidates under the other kind of metric (on ``osmall``, its thinned data),
-        affine parameters solved again under the fit's own; and the steps spent on it."""
-        metric = metrics_mod.get_metric(starts.OTHER_METRIC[self.obj.metric.log1p])
-        oobj = self.obj.with_metric(metric)
-        d = self._descend(oobj, self._select(oobj, near, spread, osmall), osmall)
+        candidates under the other kind of metric (on ``osmall``, its thinned data
+        prepared for that metric), affine parameters solved again under the fit's own;
+        and the steps spent on it.
+
+        The metric is data (:class:`brdffit.metrics.Prepared`), so this race is the
+        fit's own race's compiled program when it has as many starts: the fit's own
+        gets this one's winner as an extra start, so one start of NaN is added here
+        (it stops at once, :attr:`brdffit.lm.Reason.NONFINITE`, and is never picked)."""
+        obj = self.obj
+        zs = self._select(obj, near, spread, osmall)
+        zs = jnp.concatenate([zs, jnp.full_like(zs[:, :1], jnp.nan)], axis=1)
+        d = self._descend(obj, zs, osmall)
         cost = np.asarray(d.cost)
         pick = np.argmin(np.where(np.isfinite(cost), cost, np.inf), axis=1)
         best = np.asarray(d.z)[np.arange(len(pick)), pick]
@@ -381,11 +389,15 @@ def _linear_many(obj, z, prep):
 
 
 class _Problems:
-    """Each problem's prepared data: all samples and the thinned ones of the starts."""
+    """Each problem's prepared data: all samples and the thinned ones of the starts
+    (``thinned``: whether those are fewer), both :meth:`~brdffit.metrics.Prepared.padded`."""
 
-    def __init__(self, full: list[metrics_mod.Prepared], small: list[metrics_mod.Prepared]):
-        self.full, self.small = full, small
-        self.thinned = small[0] is not full[0]
+    def __init__(self, full: list, small: list, thinned: bool):
+        self.full, self.small, self.thinned = full, small, thinned
+
+
+def _padded(preps: list[metrics_mod.Prepared]) -> list[metrics_mod.Prepared]:
+    return [p.padded() for p in preps]
 
 
 @eqx.filter_jit
@@ -435,10 +447,9 @@ def _subset(
     """
     if n is None:
         return prep
-    idx = jnp.asarray(np.linspace(0, prep.n - 1, n).round().astype(np.int64))
+    idx = np.linspace(0, prep.n - 1, n).round().astype(np.int64)
     if like is None:
-        return jax.tree.map(lambda a: a[idx], prep)
-    return metrics_mod.Prepared(
-        g=like.g, cos_i=like.cos_i, target=prep.target[idx], weight=prep.weight[idx],
-        values=prep.values[idx],
-    )  # fmt: skip
+        return prep.take(idx)
+    keys = ("target", "weight", "values")
+    own = {k: jnp.asarray(np.asarray(getattr(prep, k))[idx]) for k in keys}
+    return dataclasses.replace(like, **own, log1p=prep.log1p, l1=prep.l1, root=prep.root)

@@ -28,13 +28,15 @@ always the exact mean absolute difference.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from typing import Literal
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, Float
+from jaxtyping import Array, Bool, Float
 
 from brdffit.errors import ParameterError
 from brdffit.geometry import ShadingGeometry, shading_geometry
@@ -71,9 +73,10 @@ class Metric:
             return np.sqrt(np.clip(1.0 - data.wi[keep, 2] ** 2, 0.0, None))[:, None] * use
         return use / max(np.sum(use), 1.0)
 
-    def loss_from_sum(self, total: Array) -> Array:
-        """The reported loss from the weighted sum of squared (or absolute) differences."""
-        return jnp.sqrt(total) if self.name == "ngan" else total
+    @property
+    def root(self) -> bool:
+        """The loss is the square root of the weighted sum (Ngan's RMS)."""
+        return self.name == "ngan"
 
 
 METRICS: dict[str, Metric] = {
@@ -94,13 +97,42 @@ def get_metric(name: str) -> Metric:
     return METRICS[name]
 
 
+SHAPE_BITS = 4
+"""Significant bits of a padded sample count (:func:`shape_bucket`): at most 1/8 of the
+rows a descent evaluates are padding (1/16 on average)."""
+
+
+def shape_bucket(n: int) -> int:
+    """The sample count ``n`` rounded up to ``m 2^e`` with ``2^(SHAPE_BITS-1) < m <=
+    2^SHAPE_BITS``.
+
+    XLA compiles one program per array shape, and compiling a fit's descents costs
+    seconds (walter: 6 s in a fresh process) where running them on 20,000 samples takes
+    0.2 s; data of any size in a bucket share the programs, padded with rows that add
+    exactly nothing (:meth:`Prepared.pad`). Materials with different
+    valid cells, a file read at another stride, a model fitted under each metric: one
+    compile each bucket, not each count (the same idea as padding variable-length
+    batches to a few lengths).
+    """
+    if n <= 1 << SHAPE_BITS:
+        return n
+    unit = 1 << ((n - 1).bit_length() - SHAPE_BITS)
+    return -(-n // unit) * unit
+
+
 class Prepared(eqx.Module):
-    """Data-only quantities of one data set for one metric, computed once.
+    """One data set as one metric sees it: the samples and channels it fits, its weights,
+    its data side and how it transforms a model's values; computed once.
+
+    The metric lives here, as data: its switches are arrays, so one compiled solve serves
+    every metric (the cross-metric start descends under a second one).
 
     Fields: ``g`` shading geometry of the kept samples; ``cos_i`` (N,); ``target``
     (N, 3) the data side ``T(f_data cos_i)``; ``weight`` (N, 3) the metric's weight per
     sample and channel, 0 for a channel left out; ``values`` (N, 3) the data in 1/sr
-    (0 where left out).
+    (0 where left out); ``log1p`` (bool scalar) ``T`` is ``ln(1 + x)``, not ``x``; ``l1``
+    absolute differences (LM: the pseudo-Huber surrogate); ``root`` the reported loss is
+    the square root of the weighted sum (``ngan``).
     """
 
     g: ShadingGeometry
@@ -108,11 +140,42 @@ class Prepared(eqx.Module):
     target: Float[Array, "n 3"]
     weight: Float[Array, "n 3"]
     values: Float[Array, "n 3"]
+    log1p: Bool[Array, ""]
+    l1: Bool[Array, ""]
+    root: Bool[Array, ""]
 
     @property
     def n(self) -> int:
         """Number of kept samples."""
         return int(self.cos_i.shape[0])
+
+    def take(self, idx: np.ndarray) -> Prepared:
+        """The samples ``idx`` (indices into the kept ones), same metric (host-side
+        indexing: no program compiled per size)."""
+        return self._rows(lambda a: np.asarray(a)[idx])
+
+    def pad(self, size: int) -> Prepared:
+        """``size`` rows: these and copies of the first sample with weight, data and
+        target 0, so every residual and Jacobian row they add is exactly 0 (the model
+        is evaluated where the first sample is, so they are finite when it is)."""
+        extra = size - self.n
+        if extra <= 0:
+            return self
+        out = self._rows(lambda a: np.concatenate([a, np.repeat(np.asarray(a)[:1], extra, 0)]))
+        zero = {k: np.zeros((size, 3)) for k in ("target", "weight", "values")}
+        for k, z in zero.items():
+            z[: self.n] = getattr(self, k)
+        return dataclasses.replace(out, **{k: jnp.asarray(z) for k, z in zero.items()})
+
+    def _rows(self, f) -> Prepared:
+        """Every per-sample array mapped by ``f`` (numpy in, numpy out), same metric."""
+        per_sample = (self.g, self.cos_i, self.target, self.weight, self.values)
+        g, cos_i, target, weight, values = jax.tree.map(lambda a: jnp.asarray(f(a)), per_sample)
+        return Prepared(g, cos_i, target, weight, values, self.log1p, self.l1, self.root)
+
+    def padded(self) -> Prepared:
+        """:meth:`pad` to :func:`shape_bucket` of the sample count."""
+        return self.pad(shape_bucket(self.n))
 
 
 def keep_mask(data: Measurements, cut_deg: float | None) -> np.ndarray:
@@ -191,6 +254,9 @@ def _prepared(data: Measurements, metric: Metric, keep: np.ndarray, g: ShadingGe
         target=transform_side(metric, values, g.cos_i),
         weight=jnp.asarray(metric.channel_weights(data, keep, use)),
         values=values,
+        log1p=jnp.asarray(metric.log1p),
+        l1=jnp.asarray(metric.l1),
+        root=jnp.asarray(metric.root),
     )
 
 
@@ -201,20 +267,20 @@ def transform_side(metric: Metric, f: Array, cos_i: Array) -> Array:
     return jnp.log1p(jnp.maximum(x, LOG_FLOOR)) if metric.log1p else x
 
 
-def differences(metric: Metric, f_model: Array, prep: Prepared) -> Array:
-    """Unweighted differences ``T(f_model cos) - T(f_data cos)``, (N, 3)."""
-    return transform_side(metric, f_model, prep.cos_i) - prep.target
+def differences(f_model: Array, prep: Prepared) -> Array:
+    """Unweighted differences ``T(f_model cos) - T(f_data cos)``, (N, 3), ``T`` the
+    metric's (``prep.log1p``; both forms are traced, one compiled program per model)."""
+    x = f_model * prep.cos_i[:, None]
+    return jnp.where(prep.log1p, jnp.log1p(jnp.maximum(x, LOG_FLOOR)), x) - prep.target
 
 
-def residuals(metric: Metric, f_model: Array, prep: Prepared) -> Array:
+def residuals(f_model: Array, prep: Prepared) -> Array:
     """The flat residual vector LM minimises (``0.5 sum r^2``), length 3N."""
-    e = differences(metric, f_model, prep)
-    root_w = jnp.sqrt(prep.weight)
-    if metric.l1:
-        # pseudo-Huber written as e * sqrt(2 / (sqrt(1 + x^2) + 1)): smooth at e = 0.
-        x = e / L1_DELTA
-        e = e * jnp.sqrt(2.0 / (jnp.sqrt(1.0 + x * x) + 1.0))
-    return (root_w * e).ravel()
+    e = differences(f_model, prep)
+    # l1: pseudo-Huber written as e * sqrt(2 / (sqrt(1 + x^2) + 1)): smooth at e = 0
+    x = e / L1_DELTA
+    e = jnp.where(prep.l1, e * jnp.sqrt(2.0 / (jnp.sqrt(1.0 + x * x) + 1.0)), e)
+    return (jnp.sqrt(prep.weight) * e).ravel()
 
 
 ROBUST_TUNING = {"huber": 1.345, "cauchy": 2.385}
@@ -264,20 +330,15 @@ def robust_weights(r: Array, kind: str | None, scale: Array | float) -> Array:
 
 
 def objective(
-    metric: Metric,
-    f_model: Array,
-    prep: Prepared,
-    robust: str | None = None,
-    scale: Array | float = 1.0,
+    f_model: Array, prep: Prepared, robust: str | None = None, scale: Array | float = 1.0
 ) -> Array:
     """``0.5 sum rho(r)^2``: what Levenberg-Marquardt minimises (``rho`` the robust loss)."""
-    r = robust_residuals(residuals(metric, f_model, prep), robust, scale)
+    r = robust_residuals(residuals(f_model, prep), robust, scale)
     return 0.5 * jnp.sum(r * r)
 
 
-def loss(metric: Metric, f_model: Array, prep: Prepared) -> Array:
-    """The exact scalar loss of the metric (see the module table)."""
-    e = differences(metric, f_model, prep)
-    w = prep.weight
-    total = jnp.sum(w * jnp.abs(e)) if metric.l1 else jnp.sum(w * e * e)
-    return metric.loss_from_sum(total)
+def loss(f_model: Array, prep: Prepared) -> Array:
+    """The exact scalar loss of the metric ``prep`` was prepared for (the module table)."""
+    e = differences(f_model, prep)
+    total = jnp.sum(prep.weight * jnp.where(prep.l1, jnp.abs(e), e * e))
+    return jnp.where(prep.root, jnp.sqrt(total), total)

@@ -1,10 +1,12 @@
-"""The least-squares objective: model, parameter layout, metric, robust loss, frozen values.
+"""The least-squares objective: model, parameter layout, robust loss, frozen values.
 
 One :class:`Objective` value is what the solver, the starts, the covariance, the
-posterior and the stress benchmark all evaluate; nothing passes those pieces around
-loose. It is an equinox Module: the model, free parameters, metric and robust kind are
-static, the frozen values and the robust scale are arrays, so one compiled solve serves
-every data set of the same shape.
+posterior and the stress benchmark all evaluate, on data prepared for a metric
+(:class:`brdffit.metrics.Prepared`, which holds the metric: its samples, weights and
+transform); nothing passes those pieces around loose. It is an equinox Module: the
+model, free parameters and robust kind are static, the frozen values and the robust
+scale are arrays, and the metric's switches are arrays of the data, so one compiled
+solve serves every data set of the same shape under every metric.
 
 A point is a flat vector ``z`` in the solver space of
 :meth:`brdffit.parameters.ParameterLayout.params` (``ln x`` for positive scales,
@@ -12,8 +14,8 @@ natural ``x`` otherwise). The objective minimised is
 
     C(z) = 0.5 sum_i rho(r_i(z)^2)
 
-with ``r`` the metric's residual vector (:func:`brdffit.metrics.residuals`) and ``rho``
-the robust loss (identity without one; :func:`brdffit.metrics.robust_residuals`).
+with ``r`` the residual vector of the data's metric (:func:`brdffit.metrics.residuals`)
+and ``rho`` the robust loss (identity without one; :func:`brdffit.metrics.robust_residuals`).
 Levenberg-Marquardt sees it through :meth:`Objective.linearize`: the iteratively
 reweighted Gauss-Newton model ``g = J^T W r``, ``H = J^T W J`` with ``W = rho'(r^2)``.
 """
@@ -31,7 +33,7 @@ from jaxtyping import Array, Float, Int
 from brdffit import metrics as metrics_mod
 from brdffit.abstract_model import AbstractModel
 from brdffit.errors import ParameterError
-from brdffit.metrics import Metric, Prepared
+from brdffit.metrics import Prepared
 from brdffit.parameters import Parameter, ParameterLayout, Params
 
 GRAM_CHUNK = 65_536
@@ -40,10 +42,10 @@ floats, 50 MB for k = 10)."""
 
 
 class Objective(eqx.Module):
-    """``0.5 sum rho(r^2)`` of one model under one metric (module docstring).
+    """``0.5 sum rho(r^2)`` of one model on data prepared for a metric (module docstring).
 
     Fields: ``model``; ``free`` the free parameter rows in table order; ``frozen`` name ->
-    fixed natural value; ``metric``; ``robust`` ``None``, ``"huber"`` or ``"cauchy"``;
+    fixed natural value; ``robust`` ``None``, ``"huber"`` or ``"cauchy"``;
     ``scale`` the robust loss's scale in residual units (1 without one; one per problem
     while :func:`brdffit.fit_many` batches problems).
     """
@@ -51,7 +53,6 @@ class Objective(eqx.Module):
     model: AbstractModel
     free: tuple[Parameter, ...] = eqx.field(static=True)
     frozen: dict[str, Array]
-    metric: Metric = eqx.field(static=True)
     robust: str | None = eqx.field(static=True, default=None)
     scale: Float[Array, "*p"] = eqx.field(default_factory=lambda: jnp.asarray(1.0))
 
@@ -59,18 +60,16 @@ class Objective(eqx.Module):
     def build(
         cls,
         model: AbstractModel,
-        metric: str | Metric,
         freeze: Mapping[str, object] | None = None,
         robust: str | None = None,
         scale: float = 1.0,
     ) -> Objective:
-        """The objective of ``model`` under ``metric`` with ``freeze`` (name -> natural value)."""
-        m = metric if isinstance(metric, Metric) else metrics_mod.get_metric(metric)
+        """The objective of ``model`` with ``freeze`` (name -> natural value)."""
         if robust is not None and robust not in metrics_mod.ROBUST_TUNING:
             raise ParameterError(f"robust={robust!r}: use None, 'huber' or 'cauchy'")
         layout = ParameterLayout.build(model.parameters, freeze)
         frozen = {k: jnp.asarray(v, jnp.float64) for k, v in layout.frozen.items()}
-        return cls(model, layout.free, frozen, m, robust, jnp.asarray(float(scale)))
+        return cls(model, layout.free, frozen, robust, jnp.asarray(float(scale)))
 
     @property
     def layout(self) -> ParameterLayout:
@@ -85,20 +84,15 @@ class Objective(eqx.Module):
     def with_robust(self, robust: str | None, scale: float | Array) -> Objective:
         """The same objective under another robust loss and scale."""
         scale = jnp.asarray(scale, jnp.float64)
-        return Objective(self.model, self.free, self.frozen, self.metric, robust, scale)
-
-    def with_metric(self, metric: Metric) -> Objective:
-        """The same objective under another metric (its data must be prepared for it)."""
-        return Objective(self.model, self.free, self.frozen, metric, self.robust, self.scale)
+        return Objective(self.model, self.free, self.frozen, robust, scale)
 
     def params(self, z: Float[Array, " k"]) -> Params:
         """Natural parameter dict (frozen values included) at the solver-space ``z``."""
         return self.layout.params(z, "solver")
 
     def residuals(self, z: Float[Array, " k"], prep: Prepared) -> Float[Array, " m"]:
-        """The metric's plain residual vector (length 3N) at ``z``."""
-        f = self.model.evaluate(self.params(z), prep.g)
-        return metrics_mod.residuals(self.metric, f, prep)
+        """The plain residual vector (length 3N) of ``prep``'s metric at ``z``."""
+        return metrics_mod.residuals(self.model.evaluate(self.params(z), prep.g), prep)
 
     def cost(self, z: Float[Array, " k"], prep: Prepared) -> Float[Array, ""]:
         """``0.5 sum rho(r^2)`` at ``z``."""
@@ -237,7 +231,7 @@ def natural_block_moments(obj: Objective, z: Array, prep: Prepared, block: Array
 def all_losses(model: AbstractModel, params: Params, preps: dict[str, Prepared]):
     """Every metric's loss at ``params``; the model is evaluated once (shared geometry)."""
     f = model.evaluate(params, next(iter(preps.values())).g)
-    return {k: metrics_mod.loss(metrics_mod.METRICS[k], f, p) for k, p in preps.items()}
+    return {k: metrics_mod.loss(f, p) for k, p in preps.items()}
 
 
 def start_params(model: AbstractModel, init: Mapping[str, object] | None) -> Params:

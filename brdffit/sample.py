@@ -283,7 +283,7 @@ class _Target(eqx.Module):
             i += p.size
         obj = self.objective
         params = obj.layout.params(u, "unconstrained")
-        r = metrics_mod.residuals(obj.metric, obj.model.evaluate(params, prep.g), prep)
+        r = metrics_mod.residuals(obj.model.evaluate(params, prep.g), prep)
         var = jnp.sum((jnp.exp(log_sigma)[:, None] * scales) ** 2, axis=0)
         ll = -0.5 * jnp.sum(jnp.log(var)) - 0.5 * jnp.sum(r * r / var)
         out = lp + ll
@@ -296,7 +296,7 @@ def _batched(target, thetas, prep, scales):
 
 
 @eqx.filter_jit
-def _factor(metric, prep, f_model, relative: bool):
+def _factor(prep, f_model, relative: bool):
     """``|d r_i / d ln f|`` (``relative``) or ``|d r_i / d f|`` at the model, floored.
 
     Floor: 1e-3 x the median. Taken at the start model (the LM optimum), not at the
@@ -305,19 +305,19 @@ def _factor(metric, prep, f_model, relative: bool):
     """
 
     def r_of(f):
-        return metrics_mod.residuals(metric, f, prep)
+        return metrics_mod.residuals(f, prep)
 
     tangent = f_model if relative else jnp.ones_like(f_model)
     s = jnp.abs(jax.jvp(r_of, (f_model,), (tangent,))[1])
     return jnp.maximum(s, 1e-3 * jnp.median(s))
 
 
-def _noise_scales(metric, prep, f_model, noise: str) -> tuple[jax.Array, tuple[str, ...]]:
+def _noise_scales(prep, f_model, noise: str) -> tuple[jax.Array, tuple[str, ...]]:
     """Per-residual factors (k, residuals) of the ``noise`` model's scales, and their labels."""
     if noise == "constant":
         return jnp.ones((1, 3 * prep.n)), ("log_sigma",)
-    add = _factor(metric, prep, f_model, False) if noise in ("additive", "mixed") else None
-    mult = _factor(metric, prep, f_model, True) if noise in ("multiplicative", "mixed") else None
+    add = _factor(prep, f_model, False) if noise in ("additive", "mixed") else None
+    mult = _factor(prep, f_model, True) if noise in ("multiplicative", "mixed") else None
     if noise == "mixed":
         return jnp.stack([add, mult]), ("log_sigma_add", "log_sigma_mult")
     return (add if add is not None else mult)[None, :], ("log_sigma",)
@@ -385,11 +385,7 @@ def check_arguments(
         raise ParameterError(f"burn={burn!r}: use an integer in [0, n_steps={n_steps})")
     if not is_int(n_subsample) or n_subsample < 1:
         raise ParameterError(f"n_subsample={n_subsample!r}: use an integer >= 1")
-    n_free = Objective.build(
-        model,
-        metrics_mod.get_metric("low_e2"),
-        freeze_map(model, freeze, start_params(model, None)),
-    ).layout.size
+    n_free = Objective.build(model, freeze_map(model, freeze, start_params(model, None))).size
     k = 2 if noise == "mixed" else 1
     ndim = n_free + k
     if n_walkers is None:
@@ -468,7 +464,7 @@ def sample(
     else:
         start = start_params(model, init)
     m = metrics_mod.get_metric(metric or "low_e2")
-    obj = Objective.build(model, m, freeze_map(model, freeze, start))
+    obj = Objective.build(model, freeze_map(model, freeze, start))
     layout, frozen = obj.layout, obj.frozen
     unknown = sorted(set(priors or {}) - {p.name for p in layout.free})
     if unknown:
@@ -481,8 +477,8 @@ def sample(
 
     full = {**start, **frozen}
     f_start = model.evaluate(full, prep.g)
-    scales, sigma_labels = _noise_scales(m, prep, f_start, noise)
-    r0 = np.asarray(metrics_mod.residuals(m, f_start, prep))
+    scales, sigma_labels = _noise_scales(prep, f_start, noise)
+    r0 = np.asarray(metrics_mod.residuals(f_start, prep))
     sigma0 = _start_sigmas(r0, np.asarray(scales))
     u0 = np.concatenate(
         [np.asarray(layout.unconstrained(start)), np.log(np.maximum(sigma0, 1e-12))]

@@ -324,7 +324,7 @@ class _Search:
 
     def _solve(self, model: AbstractModel, rows: dict[str, np.ndarray]) -> _Node:
         freeze = {n: rows[n][0] for n in self.freeze_names(model) or ()}
-        obj = Objective.build(model, self.m, freeze, self.robust, self.scale)
+        obj = Objective.build(model, freeze, self.robust, self.scale)
         lay = obj.layout
         z0 = np.stack([lay.solver_vector({k: v[r] for k, v in rows.items()})
                        for r in range(self.train.shape[0])])  # fmt: skip
@@ -336,9 +336,8 @@ class _Search:
         n, k, rss = 3 * self.prep.n, lay.size + 1, max(float(rss[0]), 1e-300)
         bic = n * math.log(rss / n) + k * math.log(n)
         held = np.asarray(held[1:])
-        value = (
-            bic if self.criterion == "bic" else float(self.m.loss_from_sum(jnp.asarray(held.sum())))
-        )
+        total = float(held.sum())
+        value = bic if self.criterion == "bic" else math.sqrt(total) if self.m.root else total
         ok = bool(np.all(np.isfinite(np.asarray(z)))) and math.isfinite(value)
         ok = ok and not np.any(np.asarray(reason) == int(lm.Reason.NONFINITE))
         return _Node(model, params, lay.size, float(loss[0]), bic, held, value, ok)
@@ -389,7 +388,7 @@ class _Search:
 
     def _start_cost(self, model: AbstractModel, rows: dict[str, np.ndarray]) -> float:
         """The all-data cost of ``model`` at its start ``rows`` (row 0)."""
-        obj = Objective.build(model, self.m)
+        obj = Objective.build(model)
         z = obj.layout.solver_vector({k: v[0] for k, v in rows.items()})
         return float(_cost(obj, jnp.asarray(z), self.prep))
 
@@ -403,7 +402,6 @@ def _cost(obj: Objective, z, prep):
 def _solve_rows(obj: Objective, z0, prep: metrics.Prepared, train, lo, hi, tol):
     """One LM descent per row of ``z0`` on the cells ``train`` marks (one compile per
     variant); per row: answer, stop reason, held-out weighted sum, RSS and loss on all."""
-    m = obj.metric
 
     def one(args):
         z, mask = args
@@ -412,11 +410,11 @@ def _solve_rows(obj: Objective, z0, prep: metrics.Prepared, train, lo, hi, tol):
         z = jnp.where(obj.cost(lin, p) < obj.cost(z, p), lin, z)
         d = lm.solve(obj, z, p, lo, hi, tol)
         f = obj.model.evaluate(obj.params(d.z), prep.g)
-        e = metrics.differences(m, f, prep)
-        e = jnp.abs(e) if m.l1 else e * e
+        e = metrics.differences(f, prep)
+        e = jnp.where(prep.l1, jnp.abs(e), e * e)
         held = jnp.sum(prep.weight * (1.0 - mask)[:, None] * e)
-        r = metrics.residuals(m, f, prep)
-        return d.z, d.reason, held, jnp.sum(r * r), metrics.loss(m, f, prep)
+        r = metrics.residuals(f, prep)
+        return d.z, d.reason, held, jnp.sum(r * r), metrics.loss(f, prep)
 
     return lax.map(one, (z0, train), batch_size=lm.batch_size())
 

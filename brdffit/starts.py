@@ -69,8 +69,8 @@ def linear_start(obj: Objective, z: jax.Array, prep: Prepared) -> jax.Array:
         return z
     f0, basis = linear_split(obj.model, obj.params(z), prep.g, names)
     w = jnp.sqrt(prep.weight) * prep.cos_i[:, None]
-    if obj.metric.log1p:
-        w = w / (1.0 + jnp.maximum(prep.values * prep.cos_i[:, None], 0.0))
+    slope = 1.0 / (1.0 + jnp.maximum(prep.values * prep.cos_i[:, None], 0.0))
+    w = jnp.where(prep.log1p, w * slope, w)
     a = (basis * w[:, :, None]).reshape(-1, basis.shape[-1])
     b = ((prep.values - f0) * w).ravel()
     ata = a.T @ a

@@ -43,7 +43,7 @@ import numpy as np
 from jaxtyping import Array
 
 from brdffit import objective as objective_mod
-from brdffit.metrics import Prepared
+from brdffit.metrics import Metric, Prepared
 from brdffit.objective import Objective
 from brdffit.parameters import ParameterLayout, Params
 from brdffit.result import AT_BOUND_ATOL, AT_BOUND_RTOL, FitResult, Status
@@ -184,7 +184,8 @@ def _free_covariance(
     """
     ix = np.ix_(act, act)
     if errors != "blocks":
-        jtj, meat, ee, rr = (np.asarray(a) for a in objective_mod.natural_moments(obj, z, prep))
+        moments = objective_mod.natural_moments(obj, z, prep.padded())
+        jtj, meat, ee, rr = (np.asarray(a) for a in moments)
         cov, cond, reason, weak = covariance(jtj[ix], meat[ix], float(ee), 3 * prep.n, errors)
         return cov, cond, reason, weak, float(rr), 0
     ids, n_blocks = block_index(prep)
@@ -199,6 +200,7 @@ def _free_covariance(
 
 def assemble(
     obj: Objective,
+    m: Metric,
     out: Outcome,
     preps: dict[str, Prepared],
     *,
@@ -207,8 +209,9 @@ def assemble(
     source: str,
     t0: float,
 ) -> FitResult:
-    """Uncertainties, information criteria, every metric and flags -> :class:`FitResult`."""
-    layout, model, m = obj.layout, obj.model, obj.metric
+    """Uncertainties, information criteria, every metric and flags -> :class:`FitResult`
+    of a fit under ``m`` (``preps``: the data prepared for every metric)."""
+    layout, model = obj.layout, obj.model
     prep = preps[m.name]
     z = jnp.asarray(out.z)
     params = {k: np.asarray(v) for k, v in obj.params(z).items()}
@@ -239,7 +242,8 @@ def assemble(
     finite = math.isfinite(rss)
     aic = n_data * math.log(rss / n_data) + 2 * k if finite else float("nan")
     bic = n_data * math.log(rss / n_data) + k * math.log(n_data) if finite else float("nan")
-    losses = {name: float(v) for name, v in objective_mod.all_losses(model, params, preps).items()}
+    padded = {name: p.padded() for name, p in preps.items()}
+    losses = {name: float(v) for name, v in objective_mod.all_losses(model, params, padded).items()}
     at_bound = _at_bound(layout, params, out.binding)
     return FitResult(
         model=model.name,

@@ -130,7 +130,7 @@ def test_results_written_with_names_read_back_with_per_scalar_labels(oren_nayar_
 def _result_at(model, params: dict, data: Measurements, freeze: dict) -> FitResult:
     """The FitResult of ``model`` at ``params`` (no descent): the real error path."""
     params = {k: jnp.asarray(v, float) for k, v in params.items()}
-    obj = Objective.build(model, "low_e2", freeze_map(model, freeze, params))
+    obj = Objective.build(model, freeze_map(model, freeze, params))
     z = obj.layout.solver_vector(params)
     out = Outcome(
         z=z, status=Status.CONVERGED, binding=np.zeros(z.size, bool),
@@ -139,8 +139,9 @@ def _result_at(model, params: dict, data: Measurements, freeze: dict) -> FitResu
     )  # fmt: skip
     preps = metrics_mod.prepare_all(data, cut_deg=80.0)
     return assemble(
-        obj, out, preps, errors="classic", cut=80.0, source="test", t0=time.perf_counter()
-    )
+        obj, metrics_mod.get_metric("low_e2"), out, preps, errors="classic", cut=80.0,
+        source="test", t0=time.perf_counter(),
+    )  # fmt: skip
 
 
 def test_a_scalar_with_an_enormous_error_is_named_not_identified_and_warned():
@@ -159,7 +160,7 @@ def test_a_scalar_with_an_enormous_error_is_named_not_identified_and_warned():
 
 
 def test_unidentified_rule_compares_the_error_with_the_allowed_range():
-    layout = Objective.build(models.get("walter"), "low_e2").layout
+    layout = Objective.build(models.get("walter")).layout
     labels = layout.labels()
     params = {"kd": np.array([0.2, 0.3, 0.4]), "f0": np.full(3, 0.5), "alpha": 0.01}
     params["ks"] = np.ones(3)

@@ -86,7 +86,7 @@ def test_block_errors_equal_refits_leaving_each_block_out_for_a_linear_model():
     r = fit_many(model, [data], "ngan", errors="blocks", cut_deg=None)[0]
     prep = prepare(data, get_metric("ngan"), cut_deg=None)
     ids, g = block_index(prep)
-    obj = Objective.build(model, "ngan")
+    obj = Objective.build(model)
     z = jnp.asarray(obj.layout.solver_vector(r.params))
     jtj = np.asarray(natural_moments(obj, z, prep)[0])
     scores, grams = (np.asarray(a) for a in block_moments(obj, z, prep, jnp.asarray(ids), g))

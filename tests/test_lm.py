@@ -51,7 +51,7 @@ def test_noisy_walter_ends_at_a_kkt_point_no_higher_than_scipy(metric):
     walter = models.get("walter")
     data = synthesize(walter, TRUTH, stride=(5, 5, 5), noise_mult=0.05, seed=3)
     prep = metrics.prepare(data, metrics.get_metric(metric))
-    obj = Objective.build(walter, metric)
+    obj = Objective.build(walter)
     z0 = obj.layout.solver_vector(walter.defaults())
     d = _solve(obj, z0, prep)
     assert lm.Reason(int(d.reason)).converged, lm.Reason(int(d.reason))
@@ -79,7 +79,7 @@ def test_an_optimum_outside_the_box_ends_on_the_bound_with_an_outward_gradient()
     bright = synthesize(lam, {"kd": 1.0}, grid="random", n=3000, seed=0)
     data = Measurements.from_directions(bright.wi, bright.wo, bright.values * 1.5)
     prep = metrics.prepare(data, metrics.get_metric("low_e2"))
-    obj = Objective.build(lam, "low_e2")
+    obj = Objective.build(lam)
     d = _solve(obj, obj.layout.solver_vector({"kd": jnp.full(3, 0.3)}), prep)
     np.testing.assert_array_equal(np.asarray(d.z), 1.0)  # exactly on the bound
     assert np.all(np.asarray(d.binding)) and lm.Reason(int(d.reason)).converged
@@ -95,7 +95,7 @@ def test_a_robust_descent_minimises_the_robust_objective():
     values[hit] *= 100.0
     data = Measurements.from_directions(clean.wi, clean.wo, values, weights=clean.weights)
     prep = metrics.prepare(data, metrics.get_metric("low_e2"))
-    obj = Objective.build(walter, "low_e2", robust="cauchy", scale=0.01)
+    obj = Objective.build(walter, robust="cauchy", scale=0.01)
     d = _solve(obj, obj.layout.solver_vector(TRUTH), prep)
     assert lm.Reason(int(d.reason)).converged
     _kkt(obj, d, prep)
@@ -105,7 +105,7 @@ def test_max_steps_counts_tried_steps():
     walter = models.get("walter")
     data = synthesize(walter, TRUTH, stride=(9, 9, 9))
     prep = metrics.prepare(data, metrics.get_metric("low_e2"))
-    obj = Objective.build(walter, "low_e2")
+    obj = Objective.build(walter)
     d = _solve(obj, obj.layout.solver_vector(walter.defaults()), prep, max_steps=2)
     assert int(d.steps) == 2 and lm.Reason(int(d.reason)) is lm.Reason.MAX_STEPS
 

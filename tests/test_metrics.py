@@ -5,6 +5,8 @@ from __future__ import annotations
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
 from brdffit import metrics
 from brdffit.measurements import Measurements
@@ -43,7 +45,7 @@ def test_loss_matches_design_formula(name, cut):
     m = metrics.get_metric(name)
     prep = metrics.prepare(data, m, cut_deg=cut)
     keep = metrics.keep_mask(data, cut)
-    got = float(metrics.loss(m, jnp.asarray(fm[keep]), prep))
+    got = float(metrics.loss(jnp.asarray(fm[keep]), prep))
     # Same float64 sums in another order: 1e-12 relative.
     np.testing.assert_allclose(got, _reference(name, data, fm, cut), rtol=1e-12)
 
@@ -54,12 +56,10 @@ def test_quadratic_metrics_loss_is_sum_of_squared_residuals(name):
     m = metrics.get_metric(name)
     prep = metrics.prepare(data, m)
     keep = metrics.keep_mask(data, 80.0)
-    r = metrics.residuals(m, jnp.asarray(fm[keep]), prep)
+    r = metrics.residuals(jnp.asarray(fm[keep]), prep)
     total = float(jnp.sum(r * r))
     expect = total**0.5 if name == "ngan" else total
-    np.testing.assert_allclose(
-        float(metrics.loss(m, jnp.asarray(fm[keep]), prep)), expect, rtol=1e-12
-    )
+    np.testing.assert_allclose(float(metrics.loss(jnp.asarray(fm[keep]), prep)), expect, rtol=1e-12)
 
 
 def test_l1_surrogate_is_quadratic_near_zero_and_linear_far():
@@ -70,7 +70,7 @@ def test_l1_surrogate_is_quadratic_near_zero_and_linear_far():
     for e, expect in [(1e-6, 1e-12), (1.0, 2 * metrics.L1_DELTA * 1.0)]:
         # f such that log1p(f cos) - target = e exactly for every sample and channel.
         f = (jnp.expm1(prep.target + e)) / prep.cos_i[:, None]
-        r = metrics.residuals(m, f, prep)
+        r = metrics.residuals(f, prep)
         # r^2 / w is 2 delta^2 (sqrt(1 + (e/delta)^2) - 1): e^2 for small e, ~2 delta |e| for large.
         np.testing.assert_allclose(float(r[0] ** 2 / w), expect, rtol=2e-3)
 
@@ -81,3 +81,29 @@ def test_unknown_metric_and_empty_selection_raise():
         metrics.get_metric("nope")
     with pytest.raises(metrics.ParameterError, match="no valid sample"):
         metrics.prepare(data, metrics.get_metric("ngan"), cut_deg=0.0)
+
+
+@given(st.integers(1, 10**8))
+def test_shape_bucket_rounds_up_by_less_than_an_eighth_to_a_fixed_point(n):
+    b = metrics.shape_bucket(n)
+    assert n <= b and 8 * (b - n) < n
+    assert metrics.shape_bucket(b) == b
+
+
+def test_shape_bucket_has_eight_sizes_per_octave():
+    assert len({metrics.shape_bucket(n) for n in range(2**14 + 1, 2**15 + 1)}) == 8
+
+
+@pytest.mark.parametrize("name", sorted(metrics.METRICS))
+def test_padded_rows_add_nothing_to_residuals_or_loss(name):
+    data, fm = _data(3)
+    prep = metrics.prepare(data, metrics.get_metric(name))
+    f = jnp.asarray(fm[metrics.keep_mask(data, 80.0)])
+    big = prep.pad(prep.n + 37)
+    # the padding repeats the first sample's directions: a model is evaluated there
+    f_big = jnp.concatenate([f, jnp.repeat(f[:1], 37, axis=0)])
+    r, r_big = metrics.residuals(f, prep), metrics.residuals(f_big, big)
+    np.testing.assert_array_equal(r_big[: r.size], r)
+    assert np.all(np.asarray(r_big[r.size :]) == 0.0)
+    np.testing.assert_allclose(metrics.loss(f_big, big), metrics.loss(f, prep), rtol=1e-14)
+    assert big.n == prep.n + 37 and prep.padded().n == metrics.shape_bucket(prep.n)

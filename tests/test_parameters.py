@@ -78,7 +78,7 @@ def test_a_neutral_value_outside_the_bounds_is_a_typed_error():
 def _low_layout(freeze=None):
     from brdffit.objective import Objective
 
-    return Objective.build(models.get("low"), "low_e2", freeze).layout
+    return Objective.build(models.get("low"), freeze).layout
 
 
 @settings(max_examples=40, deadline=None)

@@ -38,20 +38,21 @@ from .regimes import (
 
 
 @eqx.filter_jit
-def _objective(model, metric, robust, params, prep, scale):
-    return metrics.objective(metric, model.evaluate(params, prep.g), prep, robust, scale)
+def _objective(model, robust, params, prep, scale):
+    return metrics.objective(model.evaluate(params, prep.g), prep, robust, scale)
 
 
-def objective(model, metric: str, robust: str | None, scale: float, params: dict, prep) -> float:
-    """``0.5 sum rho(r)^2`` of the metric's residuals at ``params`` (natural units)."""
+def objective(model, robust: str | None, scale: float, params: dict, prep) -> float:
+    """``0.5 sum rho(r)^2`` of the residuals of ``prep``'s metric at ``params`` (natural
+    units)."""
     p = {k: jnp.asarray(v, jnp.float64) for k, v in params.items()}
-    return float(_objective(model, get_metric(metric), robust, p, prep, jnp.asarray(scale)))
+    return float(_objective(model, robust, p, prep, jnp.asarray(scale)))
 
 
-def zero_objective(metric: str, robust: str | None, scale: float, prep) -> float:
+def zero_objective(robust: str | None, scale: float, prep) -> float:
     """The objective of the zero BRDF: the data's own energy (the tolerance floor's scale)."""
     zero = jnp.zeros_like(prep.values)
-    return float(metrics.objective(get_metric(metric), zero, prep, robust, jnp.asarray(scale)))
+    return float(metrics.objective(zero, prep, robust, jnp.asarray(scale)))
 
 
 def _finite_params(params: dict) -> bool:
@@ -218,12 +219,12 @@ def run_case(
     local = one_fit(free_truth, scale, screen=0)[0] if corrupts(regime) else None
     for rec in [ref, *starts, *([local] if local else [])]:
         rec["objective"] = (
-            objective(model, metric, regime.robust, robust_scale, rec["params"], prep)
+            objective(model, regime.robust, robust_scale, rec["params"], prep)
             if rec.get("params") is not None and rec["finite"]
             else None
         )
-    j0 = zero_objective(metric, regime.robust, robust_scale, prep)
-    jt = objective(model, metric, regime.robust, robust_scale, spec.truth, prep)
+    j0 = zero_objective(regime.robust, robust_scale, prep)
+    jt = objective(model, regime.robust, robust_scale, spec.truth, prep)
     out.update(robust_scale=scale, zero_objective=j0, truth_objective=jt, reference=ref,
                starts=starts, **({"local": local} if local else {}))  # fmt: skip
     score(out, model)
