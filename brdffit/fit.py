@@ -164,12 +164,15 @@ def fit_many(
         names = ", ".join(f"{d.source}: {p[m.name].n}" for d, p in zip(datasets, per, strict=True))
         raise ParameterError(f"fit_many: data sets keep different sample counts ({names})")
     other = starts.OTHER_METRIC[m.log1p]
+    padded = [metrics_mod.padded_all(p) for p in per]
     engine = _Engine(obj, s, [p[other] for p in per])
-    outcomes = engine.run([p[m.name] for p in per], {**first, **obj.frozen})
+    outcomes = engine.run([p[m.name] for p in per], [q[m.name] for q in padded], first | obj.frozen)
     results = []
-    for data, out, mine in zip(datasets, outcomes, per, strict=True):
+    for data, out, mine, q in zip(datasets, outcomes, per, padded, strict=True):
         o = obj if out.robust_scale is None else obj.with_robust(s.robust, out.robust_scale)
-        r = assemble(o, m, out, mine, errors=s.errors, cut=s.cut_deg, source=data.source, t0=t0)
+        r = assemble(
+            o, m, out, mine, padded=q, errors=s.errors, cut=s.cut_deg, source=data.source, t0=t0
+        )
         if s.throw and not r.converged:
             raise FitError(f"fit of {model.name} to {data.source}: {r.status.value}", r)
         results.append(r)
@@ -259,14 +262,17 @@ class _Engine:
         lo, hi = obj.layout.solver_bounds()
         self.lo, self.hi = jnp.asarray(lo), jnp.asarray(hi)
 
-    def run(self, preps: list[metrics_mod.Prepared], first: dict) -> list[Outcome]:
+    def run(self, preps: list, padded: list, first: dict) -> list[Outcome]:
+        """Each problem's outcome from its data ``preps`` (the fit's metric) and the same
+        :meth:`~brdffit.metrics.Prepared.padded`; ``first`` the first start (natural)."""
         s, obj = self.s, self.obj
         n_problems = len(preps)
         n_coarse = coarse_size(preps[0].n, s.coarse)
         small = [_subset(p, n_coarse) for p in preps]
         osmall = [_subset(o, n_coarse, like=sm) for o, sm in zip(self.others, small, strict=True)]
         thinned, n_small = small[0] is not preps[0], small[0].n
-        small, osmall = _padded(small), _padded(osmall)
+        small = [p.padded() for p in small]
+        osmall = [o.padded(geometry=sp) for o, sp in zip(osmall, small, strict=True)]
         near, spread = starts.draws(
             obj.layout, first, n_restarts=s.n_restarts, screen=s.screen,
             rng=np.random.default_rng(s.seed),
@@ -276,7 +282,7 @@ class _Engine:
         if len(spread):
             cross, extra = self._cross_metric_start(near, spread, small, osmall)
             zs = np.concatenate([zs, cross[:, None, :]], axis=1)
-        problems = _Problems(_padded(preps), small, thinned)
+        problems = _Problems(padded, small, thinned)
         rows = np.arange(n_problems)
         st = self._stage(obj, zs, problems)
         origin, steps = zs[rows, st.pick], st.steps
@@ -394,10 +400,6 @@ class _Problems:
 
     def __init__(self, full: list, small: list, thinned: bool):
         self.full, self.small, self.thinned = full, small, thinned
-
-
-def _padded(preps: list[metrics_mod.Prepared]) -> list[metrics_mod.Prepared]:
-    return [p.padded() for p in preps]
 
 
 @eqx.filter_jit

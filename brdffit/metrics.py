@@ -28,7 +28,6 @@ always the exact mean absolute difference.
 
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass
 from typing import Literal
 
@@ -36,6 +35,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax import lax
 from jaxtyping import Array, Bool, Float
 
 from brdffit.errors import ParameterError
@@ -154,18 +154,33 @@ class Prepared(eqx.Module):
         indexing: no program compiled per size)."""
         return self._rows(lambda a: np.asarray(a)[idx])
 
-    def pad(self, size: int) -> Prepared:
+    def pad(self, size: int, geometry: Prepared | None = None) -> Prepared:
         """``size`` rows: these and copies of the first sample with weight, data and
         target 0, so every residual and Jacobian row they add is exactly 0 (the model
-        is evaluated where the first sample is, so they are finite when it is)."""
+        is evaluated where the first sample is, so they are finite when it is).
+
+        ``geometry``: the same samples already padded to ``size`` under another metric;
+        its directions are shared, not copied again.
+        """
         extra = size - self.n
         if extra <= 0:
             return self
-        out = self._rows(lambda a: np.concatenate([a, np.repeat(np.asarray(a)[:1], extra, 0)]))
-        zero = {k: np.zeros((size, 3)) for k in ("target", "weight", "values")}
-        for k, z in zero.items():
-            z[: self.n] = getattr(self, k)
-        return dataclasses.replace(out, **{k: jnp.asarray(z) for k, z in zero.items()})
+        if geometry is None:
+            g, cos_i = jax.tree.map(
+                lambda a: jnp.asarray(np.concatenate([a, np.repeat(np.asarray(a)[:1], extra, 0)])),
+                (self.g, self.cos_i),
+            )
+        else:
+            g, cos_i = geometry.g, geometry.cos_i
+        target, weight, values = (
+            jnp.asarray(np.concatenate([a, np.zeros((extra, 3))]))
+            for a in (self.target, self.weight, self.values)
+        )
+        return Prepared(g, cos_i, target, weight, values, self.log1p, self.l1, self.root)
+
+    def padded(self, geometry: Prepared | None = None) -> Prepared:
+        """:meth:`pad` to :func:`shape_bucket` of the sample count."""
+        return self.pad(shape_bucket(self.n), geometry)
 
     def _rows(self, f) -> Prepared:
         """Every per-sample array mapped by ``f`` (numpy in, numpy out), same metric."""
@@ -173,9 +188,16 @@ class Prepared(eqx.Module):
         g, cos_i, target, weight, values = jax.tree.map(lambda a: jnp.asarray(f(a)), per_sample)
         return Prepared(g, cos_i, target, weight, values, self.log1p, self.l1, self.root)
 
-    def padded(self) -> Prepared:
-        """:meth:`pad` to :func:`shape_bucket` of the sample count."""
-        return self.pad(shape_bucket(self.n))
+
+def padded_all(preps: dict[str, Prepared]) -> dict[str, Prepared]:
+    """:meth:`Prepared.padded` of each; a geometry they share (:func:`prepare_all`) is
+    padded once (on the full MERL grid a copy of it takes 0.2-0.5 s)."""
+    out: dict[str, Prepared] = {}
+    done: dict[int, Prepared] = {}
+    for name, p in preps.items():
+        out[name] = p.padded(done.get(id(p.g)))
+        done.setdefault(id(p.g), out[name])
+    return out
 
 
 def keep_mask(data: Measurements, cut_deg: float | None) -> np.ndarray:
@@ -269,18 +291,28 @@ def transform_side(metric: Metric, f: Array, cos_i: Array) -> Array:
 
 def differences(f_model: Array, prep: Prepared) -> Array:
     """Unweighted differences ``T(f_model cos) - T(f_data cos)``, (N, 3), ``T`` the
-    metric's (``prep.log1p``; both forms are traced, one compiled program per model)."""
+    metric's (``prep.log1p``: a conditional, so one compiled program serves every metric
+    and runs only the form it needs; a ``where`` computing both, tangents included, made
+    a walter fit at 20,234 samples take 0.23 s, against 0.16 s)."""
     x = f_model * prep.cos_i[:, None]
-    return jnp.where(prep.log1p, jnp.log1p(jnp.maximum(x, LOG_FLOOR)), x) - prep.target
+    return lax.cond(prep.log1p, _log_side, lambda v: v, x) - prep.target
 
 
 def residuals(f_model: Array, prep: Prepared) -> Array:
     """The flat residual vector LM minimises (``0.5 sum r^2``), length 3N."""
-    e = differences(f_model, prep)
-    # l1: pseudo-Huber written as e * sqrt(2 / (sqrt(1 + x^2) + 1)): smooth at e = 0
-    x = e / L1_DELTA
-    e = jnp.where(prep.l1, e * jnp.sqrt(2.0 / (jnp.sqrt(1.0 + x * x) + 1.0)), e)
+    e = lax.cond(prep.l1, _pseudo_huber, lambda v: v, differences(f_model, prep))
     return (jnp.sqrt(prep.weight) * e).ravel()
+
+
+def _log_side(x: Array) -> Array:
+    return jnp.log1p(jnp.maximum(x, LOG_FLOOR))
+
+
+def _pseudo_huber(e: Array) -> Array:
+    """``e`` such that ``e^2`` is the pseudo-Huber loss of ``e``, written as
+    ``e sqrt(2 / (sqrt(1 + x^2) + 1))`` with ``x = e / L1_DELTA``: smooth at ``e = 0``."""
+    x = e / L1_DELTA
+    return e * jnp.sqrt(2.0 / (jnp.sqrt(1.0 + x * x) + 1.0))
 
 
 ROBUST_TUNING = {"huber": 1.345, "cauchy": 2.385}

@@ -42,6 +42,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array
 
+from brdffit import metrics as metrics_mod
 from brdffit import objective as objective_mod
 from brdffit.metrics import Metric, Prepared
 from brdffit.objective import Objective
@@ -175,16 +176,17 @@ def covariance(
 
 
 def _free_covariance(
-    obj: Objective, z: Array, prep: Prepared, act: np.ndarray, errors: str
+    obj: Objective, z: Array, prep: Prepared, padded: Prepared, act: np.ndarray, errors: str
 ) -> tuple[np.ndarray | None, float, str | None, np.ndarray, float, int]:
-    """Covariance of the scalars not held on a bound (``act``) by ``errors``.
+    """Covariance of the scalars not held on a bound (``act``) by ``errors`` (``padded``:
+    ``prep`` padded, for the sums that padding leaves unchanged).
 
     Returns (cov, condition, reason, weak) as :func:`covariance`, then the plain
     residuals' ``r.r`` and the number of blocks (0 unless ``errors="blocks"``).
     """
     ix = np.ix_(act, act)
     if errors != "blocks":
-        moments = objective_mod.natural_moments(obj, z, prep.padded())
+        moments = objective_mod.natural_moments(obj, z, padded)
         jtj, meat, ee, rr = (np.asarray(a) for a in moments)
         cov, cond, reason, weak = covariance(jtj[ix], meat[ix], float(ee), 3 * prep.n, errors)
         return cov, cond, reason, weak, float(rr), 0
@@ -204,15 +206,18 @@ def assemble(
     out: Outcome,
     preps: dict[str, Prepared],
     *,
+    padded: dict[str, Prepared] | None = None,
     errors: str,
     cut: float | None,
     source: str,
     t0: float,
 ) -> FitResult:
     """Uncertainties, information criteria, every metric and flags -> :class:`FitResult`
-    of a fit under ``m`` (``preps``: the data prepared for every metric)."""
+    of a fit under ``m`` (``preps``: the data prepared for every metric; ``padded``: the
+    same :func:`~brdffit.metrics.padded_all`, made here if not given)."""
     layout, model = obj.layout, obj.model
     prep = preps[m.name]
+    padded = metrics_mod.padded_all(preps) if padded is None else padded
     z = jnp.asarray(out.z)
     params = {k: np.asarray(v) for k, v in obj.params(z).items()}
     cov = corr = stderr = None
@@ -220,7 +225,9 @@ def assemble(
     n_data, n_blocks = 3 * prep.n, 0
     if out.status is not Status.NONFINITE:
         act = ~out.binding
-        cov_a, cond, reason, weak, rr, n_blocks = _free_covariance(obj, z, prep, act, errors)
+        cov_a, cond, reason, weak, rr, n_blocks = _free_covariance(
+            obj, z, prep, padded[m.name], act, errors
+        )
         rss = max(rr, 1e-300)
         labels_act = [lab for lab, a in zip(layout.labels(), act, strict=True) if a]
         weak_names = [lab for lab, w in zip(labels_act, weak, strict=True) if w]
@@ -242,7 +249,6 @@ def assemble(
     finite = math.isfinite(rss)
     aic = n_data * math.log(rss / n_data) + 2 * k if finite else float("nan")
     bic = n_data * math.log(rss / n_data) + k * math.log(n_data) if finite else float("nan")
-    padded = {name: p.padded() for name, p in preps.items()}
     losses = {name: float(v) for name, v in objective_mod.all_losses(model, params, padded).items()}
     at_bound = _at_bound(layout, params, out.binding)
     return FitResult(
