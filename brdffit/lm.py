@@ -136,7 +136,8 @@ class Descent(eqx.Module):
     ``slow`` whether the last accepted step lowered the cost by less than a fifth
     (module docstring, item 5); ``lam`` and ``nu`` the damping and its growth factor;
     ``d`` Marquardt's scale; ``steps`` tried steps; ``reason`` (:class:`Reason` value);
-    ``binding`` the scalars held on a bound at the end.
+    ``binding`` the scalars held on a bound at the end; ``fresh`` not linearised yet
+    (:func:`init`).
     """
 
     z: Float[Array, " k"]
@@ -152,6 +153,7 @@ class Descent(eqx.Module):
     steps: Int[Array, ""]
     reason: Int[Array, ""]
     binding: Bool[Array, " k"]
+    fresh: Bool[Array, ""]
 
 
 def _binding(z: Array, g: Array, lo: Array, hi: Array) -> Array:
@@ -169,9 +171,26 @@ def _gradient_test(cost: Array, g: Array, h: Array, binding: Array) -> Array:
 
 
 def init(obj: LeastSquares, z0: Array, prep: Any, lo: Array, hi: Array, tol: Tolerances) -> Descent:
-    """The state at ``z0`` (clipped into the box): one linearisation."""
+    """The state at ``z0`` (clipped into the box), not linearised yet: the first
+    iteration of the loop does that (:func:`step`), so a compiled descent holds one copy
+    of the linearisation (the Jacobian pass, most of what XLA compiles), not two.
+    ``obj``, ``prep`` and ``tol`` are those :func:`step` gets."""
     z = jnp.clip(z0, lo, hi)
-    cost, g, h = obj.linearize(z, prep)
+    zero, one = jnp.zeros((z.size, z.size), z.dtype), jnp.ones((), z.dtype)
+    return Descent(
+        z=z, cost=jnp.inf * one, g=jnp.zeros_like(z), h=zero, curv=zero,
+        augmented=jnp.zeros((), bool), slow=jnp.zeros((), bool), lam=TAU * one, nu=2.0 * one,
+        d=jnp.ones_like(z), steps=jnp.zeros((), int), reason=jnp.asarray(Reason.RUNNING),
+        binding=jnp.zeros(z.shape, bool), fresh=jnp.ones((), bool),
+    )  # fmt: skip
+
+
+def _linearised(
+    z: Array, cost: Array, g: Array, h: Array, lo: Array, hi: Array, tol: Tolerances
+) -> Descent:
+    """The state at ``z`` once its linearisation ``(cost, g, h)`` is known: Marquardt's
+    scale from ``diag(h)``, damping ``TAU``, no curvature estimate, and the gradient test
+    (a start at a stationary point stops there)."""
     finite = jnp.isfinite(cost) & jnp.all(jnp.isfinite(g)) & jnp.all(jnp.isfinite(h))
     binding = _binding(z, g, lo, hi)
     done = _gradient_test(cost, g, h, binding) <= tol.gtol
@@ -183,7 +202,7 @@ def init(obj: LeastSquares, z0: Array, prep: Any, lo: Array, hi: Array, tol: Tol
         z=z, cost=cost, g=g, h=h, curv=jnp.zeros_like(h), augmented=jnp.zeros((), bool),
         slow=jnp.zeros((), bool),
         lam=TAU * one, nu=2.0 * one, d=d, steps=jnp.zeros((), int), reason=reason,
-        binding=binding,
+        binding=binding, fresh=jnp.zeros((), bool),
     )  # fmt: skip
 
 
@@ -211,7 +230,8 @@ def _secant(curv: Array, sz: Array, g0: Array, g1: Array, h1: Array) -> Array:
 def step(
     obj: LeastSquares, s: Descent, prep: Any, lo: Array, hi: Array, tol: Tolerances
 ) -> Descent:
-    """One tried step (module docstring, items 1-5) and the stopping tests."""
+    """One tried step (module docstring, items 1-5) and the stopping tests; on a
+    ``fresh`` state (:func:`init`) only the linearisation at its point."""
     free = ~s.binding
     both = free[:, None] & free[None, :]
     eye = jnp.eye(s.z.size, dtype=s.z.dtype)
@@ -248,14 +268,17 @@ def step(
     small_x = jnp.linalg.norm(root * sz) <= tol.xtol * (tol.xtol + jnp.linalg.norm(root * s.z))
     small_f = ok & (actual <= tol.ftol * s.cost) & (predicted <= tol.ftol * s.cost)
 
-    def relinearize() -> tuple[Array, Array, Array]:
-        return obj.linearize(trial, prep)
-
     # the step and cost tests need no Jacobian at the trial: a descent that stops on
     # them keeps the last one (its gradient and Gauss-Newton matrix are those of the
     # point one step, below the tolerances, before)
     moved = ok & ~small_f & ~small_x
-    cost, g, h = lax.cond(moved, relinearize, lambda: (s.cost, s.g, s.h))
+    at = jnp.where(s.fresh, s.z, trial)
+
+    def relinearize() -> tuple[Array, Array, Array]:
+        return obj.linearize(at, prep)
+
+    cost, g, h = lax.cond(moved | s.fresh, relinearize, lambda: (s.cost, s.g, s.h))
+    first = _linearised(s.z, cost, g, h, lo, hi, tol)
     curv = jnp.where(moved, _secant(s.curv, sz, s.g, g, h), s.curv)
     cost = jnp.where(ok, c_trial, cost)
     finite = jnp.all(jnp.isfinite(g)) & jnp.all(jnp.isfinite(h))
@@ -269,7 +292,10 @@ def step(
         [Reason.NONFINITE, Reason.GTOL, Reason.GTOL, Reason.FTOL, Reason.XTOL, Reason.MAX_STEPS],
         Reason.RUNNING,
     )
-    return Descent(z, cost, g, h, curv, next_aug, slow, lam, nu, dscale, steps, reason, binding)
+    new = Descent(
+        z, cost, g, h, curv, next_aug, slow, lam, nu, dscale, steps, reason, binding, s.fresh
+    )
+    return jax.tree.map(lambda a, b: jnp.where(s.fresh, a, b), first, new)
 
 
 def solve(
