@@ -50,6 +50,10 @@ with ``n`` up to 1e5 turns a rounding of ``b`` into ``n eps = 1.1e-11``; ``exp(x
 ``|x|`` up to ~745 turns one of ``x`` into ``745 eps = 8e-14``; a few dozen further roundings
 add ~1e-14. 1e-9 leaves a factor ~100 above the worst of these and is 10^7 below the O(1)
 errors the test exists for (Lafortune's old exponent cap: factors 0.38 to 1e-37)."""
+MODEL_RTOL = {"sgd": 1e-7}
+"""Models with an error of their own method above :data:`RTOL`: SGD reads Smith's Lambda
+from a cubic Hermite table (``models/sgd.py``), within 2e-8 of its quadrature relative in
+each of G1(wi) and G1(wo); ``tests/test_model_sgd.py`` holds it to the same 1e-7."""
 ATOL = 1e-280
 """Absolute floor in 1/sr. Log-space guards floor exponents at -700 (``exp(-700) = 1e-304``,
 just above float64's smallest normal number 2.2e-308), and the value is then multiplied by
@@ -207,7 +211,7 @@ def to_mpf(x) -> mp.mpf:
     return mp.mpf(x)
 
 
-def verdict(f: float, ref: mp.mpf) -> tuple[str | None, float]:
+def verdict(f: float, ref: mp.mpf, rtol: float = RTOL) -> tuple[str | None, float]:
     """(what is wrong or None, relative error) of one float64 value against the reference."""
     if not math.isnan(f) and abs(ref) > FLOAT64_OVERFLOW:
         ok = f == math.copysign(math.inf, ref)
@@ -218,8 +222,8 @@ def verdict(f: float, ref: mp.mpf) -> tuple[str | None, float]:
         return (None if f == 0 else "nonzero where the reference is 0"), math.inf * (f != 0)
     r = float(ref)  # within float64's range here; rounding it costs 1e-16 of RTOL's 1e-9
     err = abs(f - r)
-    rel = err / abs(r) if abs(r) > ATOL / RTOL else 0.0  # ATOL's regime: not scored
-    return (None if err <= RTOL * abs(r) + ATOL else "error"), rel
+    rel = err / abs(r) if abs(r) > ATOL / rtol else 0.0  # ATOL's regime: not scored
+    return (None if err <= rtol * abs(r) + ATOL else "error"), rel
 
 
 def input_floor(reference, model, params: dict, wi, wo, ref: np.ndarray, seed: int) -> np.ndarray:
@@ -249,11 +253,13 @@ def precision_failures(
     """Compare one model with its reference on the whole grid.
 
     Returns the failures, rows ``(set, pair, channel, kind, model value, reference, relative
-    error)``, and a summary: the worst relative error within ``RTOL`` (``"worst"``, with its set
+    error)``, and a summary: the worst relative error within the tolerance (:data:`RTOL`, or
+    the model's :data:`MODEL_RTOL`) (``"worst"``, with its set
     and pair) and the number and worst relative error of the values that needed the input
     floor (``"floored"``, ``"worst_floored"``).
     """
     names, wi, wo = PAIRS if pairs is None else pairs
+    rtol = MODEL_RTOL.get(model.name, RTOL)
     sets = parameter_sets(model, base)
     values = model_values(model, sets, jnp.asarray(wi), jnp.asarray(wo))
     failures: list = []
@@ -271,7 +277,7 @@ def precision_failures(
                 continue
             bad = []
             for i, c in np.ndindex(f.shape):
-                kind, rel = verdict(float(f[i, c]), ref[i, c])
+                kind, rel = verdict(float(f[i, c]), ref[i, c], rtol)
                 if kind is None:
                     summary["worst"] = max(summary["worst"], (rel, label, names[i]))
                 else:
@@ -282,7 +288,7 @@ def precision_failures(
             floor = dict(zip(rows, spread, strict=True))
             for i, c, kind, rel in bad:
                 if kind in floorable:
-                    allowed = RTOL * abs(ref[i, c]) + ATOL + FLOOR_FACTOR * floor[i][c]
+                    allowed = rtol * abs(ref[i, c]) + ATOL + FLOOR_FACTOR * floor[i][c]
                     if abs(mp.mpf(float(f[i, c])) - ref[i, c]) <= allowed:
                         summary["floored"] += 1
                         summary["worst_floored"] = max(summary["worst_floored"], rel)
