@@ -107,12 +107,12 @@ def shape_bucket(n: int) -> int:
     2^SHAPE_BITS``.
 
     XLA compiles one program per array shape, and compiling a fit's descents costs
-    seconds (walter: 6 s in a fresh process) where running them on 20,000 samples takes
-    0.2 s; data of any size in a bucket share the programs, padded with rows that add
-    exactly nothing (:meth:`Prepared.pad`). Materials with different
-    valid cells, a file read at another stride, a model fitted under each metric: one
-    compile each bucket, not each count (the same idea as padding variable-length
-    batches to a few lengths).
+    seconds (walter's first fit in a fresh process: about 6 s, nearly all of it
+    compilation) where running them on 20,000 samples takes 0.2 s. Data of any size in a
+    bucket share the programs, padded with rows that add exactly nothing
+    (:meth:`Prepared.pad`): materials with different valid cells or a file read at
+    another stride compile once per bucket, not once per count (the same idea as padding
+    variable-length batches to a few lengths).
     """
     if n <= 1 << SHAPE_BITS:
         return n
