@@ -186,12 +186,14 @@ def cmd_fit(args) -> None:
     if args.json:
         _write(args.json, r.to_json())
     if args.export:
-        from brdffit.export import default_prefix, write_exports
+        from brdffit.export import default_prefix, render_note, write_exports
         from brdffit.models import label
 
         prefix = args.export_prefix or default_prefix(args.file, args.json, label(model))
         for e, paths in write_exports(r, args.export, prefix):
             print(f"export {e.summary()} -> {', '.join(str(p) for p in paths)}")
+        if note := render_note(r.metric):
+            print(f"note: {note}")
     if args.report:
         from brdffit.html_report import write_fit_html
 

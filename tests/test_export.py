@@ -451,6 +451,16 @@ def test_write_exports_writes_every_file_atomically(tmp_path):
     assert not list(tmp_path.glob(".*.tmp"))
 
 
+def test_a_fit_under_a_metric_other_than_ngan_says_how_to_refit_for_renders():
+    """A renderer integrates f cos over solid angle: only ngan's loss bounds the albedo
+    error, so an export of a low_e2 fit names ngan, and one of an ngan fit says nothing."""
+    low = result("lambert", {"kd": KD})
+    ngan = FitResult.from_dict(low.to_dict() | {"metric": "ngan"})
+    (first, *_) = export(low, "gltf").notes
+    assert first.startswith("fitted under low_e2") and "'ngan'" in first
+    assert not any("fitted under" in n for n in export(ngan, "gltf").notes)
+
+
 def test_targets_are_checked_and_prefixes_derived():
     assert parse_targets("gltf, mitsuba,gltf") == ("gltf", "mitsuba")
     with pytest.raises(ExportError, match="'usd' unknown"):
@@ -477,6 +487,8 @@ def test_cli_fit_export_writes_files_and_one_line_per_target(capsys, merl_file, 
     assert code == 0 and len(lines) == 3
     assert all(" exact, relative RMS error" in ln for ln in lines)
     assert "(lambert -> diffuse)" in lines[0]  # the BSDF tree written
+    (note,) = [ln for ln in out.splitlines() if ln.startswith("note: ")]  # default low_e2
+    assert "fitted under low_e2" in note and "'ngan'" in note
     for suffix in (".mitsuba.xml", ".mitsuba.json", ".gltf", ".mtlx"):
         assert (tmp_path / f"matte{suffix}").is_file()
     code = main([str(a) for a in argv[:4] + ["--model", "walter", "--export", "materialx"]])
