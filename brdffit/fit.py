@@ -164,9 +164,9 @@ def fit_many(
         names = ", ".join(f"{d.source}: {p[m.name].n}" for d, p in zip(datasets, per, strict=True))
         raise ParameterError(f"fit_many: data sets keep different sample counts ({names})")
     other = starts.OTHER_METRIC[m.log1p]
-    padded = [metrics_mod.padded_all(p) for p in per]
+    padded = [p[m.name].padded() for p in per]
     engine = _Engine(obj, s, [p[other] for p in per])
-    outcomes = engine.run([p[m.name] for p in per], [q[m.name] for q in padded], first | obj.frozen)
+    outcomes = engine.run([p[m.name] for p in per], padded, first | obj.frozen)
     results = []
     for data, out, mine, q in zip(datasets, outcomes, per, padded, strict=True):
         o = obj if out.robust_scale is None else obj.with_robust(s.robust, out.robust_scale)

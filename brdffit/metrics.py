@@ -189,17 +189,6 @@ class Prepared(eqx.Module):
         return Prepared(g, cos_i, target, weight, values, self.log1p, self.l1, self.root)
 
 
-def padded_all(preps: dict[str, Prepared]) -> dict[str, Prepared]:
-    """:meth:`Prepared.padded` of each; a geometry they share (:func:`prepare_all`) is
-    padded once (on the full MERL grid a copy of it takes 0.2-0.5 s)."""
-    out: dict[str, Prepared] = {}
-    done: dict[int, Prepared] = {}
-    for name, p in preps.items():
-        out[name] = p.padded(done.get(id(p.g)))
-        done.setdefault(id(p.g), out[name])
-    return out
-
-
 def keep_mask(data: Measurements, cut_deg: float | None) -> np.ndarray:
     """Valid samples (at least one channel) with both zenith angles below ``cut_deg``
     (None: no cut)."""
