@@ -37,8 +37,8 @@ under ``ngan``; every export of a fit under another metric carries that note
 (:func:`render_note`). Measured on 11 RGL-EPFL files (``benchmarks/render_check.py``,
 white environment, against Mitsuba's ``measured`` plugin): fitted under ``ngan``, each
 of the 4 matte files has a model that renders within 0.10 relative RMSE and 10% per
-channel, and the best env error of 10 of the 11 files falls; under ``low_e2`` the green
-felt had none.
+channel, and the best env error falls on all 11 files; under ``low_e2`` the green felt
+had none.
 
 ``write_exports(result, targets, prefix)`` writes the files atomically:
 ``PREFIX.mitsuba.xml`` and ``PREFIX.mitsuba.json``, ``PREFIX.gltf``, ``PREFIX.mtlx``.
