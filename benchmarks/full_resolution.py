@@ -151,6 +151,7 @@ def main() -> None:
         one_pair(args.pair[0], args.pair[1], args.pair[2:])
         return
     out = Path(args.out)
+    out.parent.mkdir(parents=True, exist_ok=True)  # before the first pair, not after it
     done = {}
     if out.exists():
         for line in out.read_text().splitlines():
