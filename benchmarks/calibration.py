@@ -8,7 +8,7 @@ interval holds the truth, with a Clopper-Pearson 95% interval on that fraction.
 Data (one fixed design, only the noise changes between data sets): the strided MERL
 grid ``STRIDE`` = (5, 9, 9) (18 theta_h x 10 theta_d x 20 phi_d bin centres, 3,600
 cells; 2,266 inside the 80-degree cut, x 3 channels), solid-angle weights from
-:func:`brdffit.merl.merl_grid`. theta_h is sampled densely near the mirror direction
+:func:`brdffit.io.merl.merl_grid`. theta_h is sampled densely near the mirror direction
 (the MERL sqrt spacing), so the sharp lobes are resolved with few cells. Noise per cell
 and channel, ``eps ~ N(0, 1)``, independent:
 
@@ -76,7 +76,7 @@ per LM answer and per posterior sample), so a swapped pair of lobes is not count
 a miss; the number of swaps is reported.
 
 Each setting's results live in one JSON file (``--out``/<setting>.json), one record per
-data set, written atomically as each data set finishes (:mod:`brdffit.jobs`); a killed
+data set, written atomically as each data set finishes (:mod:`brdffit.util.jobs`); a killed
 run resumes where it stopped. The tables are rebuilt from those files on every run.
 
 Run: python3 benchmarks/calibration.py --quick                 # smoke test, 4 data sets
@@ -117,12 +117,13 @@ import numpy as np
 from scipy import stats
 
 import brdffit
-from brdffit import fit, models, sample
-from brdffit.atomic import write_text
+from brdffit import models
+from brdffit.engine import fit, sample
 from brdffit.errors import ChainTooShortError
-from brdffit.jobs import has_key, run_jobs, write_json
-from brdffit.merl import merl_grid, merl_grid_measurements
-from brdffit.tables import render
+from brdffit.io.merl import merl_grid, merl_grid_measurements
+from brdffit.util.atomic import write_text
+from brdffit.util.jobs import has_key, run_jobs, write_json
+from brdffit.util.text_table import render
 
 STRIDE = (5, 9, 9)
 CUT_DEG = 80.0

@@ -3,7 +3,7 @@
 Issue 31, item 4: the 100-material comparison runs on a MERL sub-grid; this measures
 what the sub-grid changes. For every (material, metric) that both sweep folders hold,
 the models are ranked by the metric as ``brdffit report`` ranks them
-(:func:`brdffit.crossrank.matrices`) and the two rankings are compared: Kendall's tau
+(:func:`brdffit.selection.crossrank.matrices`) and the two rankings are compared: Kendall's tau
 (scipy), whether the best model is the same, how many of the top three agree, and the
 largest move of one model's rank.
 
@@ -19,7 +19,7 @@ import argparse
 import numpy as np
 from scipy.stats import kendalltau
 
-from brdffit.crossrank import load_sweep, matrices
+from brdffit.selection.crossrank import load_sweep, matrices
 
 
 def compare(a_dir: str, b_dir: str) -> list[dict]:

@@ -40,7 +40,7 @@ import numpy as np  # noqa: E402
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from brdffit import models  # noqa: E402
-from brdffit.geometry import shading_geometry, uniform_hemisphere  # noqa: E402
+from brdffit.core.geometry import shading_geometry, uniform_hemisphere  # noqa: E402
 from tests.test_model_disney import _OFF, minimal_reference  # noqa: E402
 
 N = 100_000

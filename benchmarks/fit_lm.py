@@ -14,7 +14,7 @@ under the 80-degree cut, x 3 channels). For each metric
   (jitted, forward mode) in natural units;
 - ``floor``: one residual + Jacobian evaluation and one k x k Cholesky solve at full
   resolution, the least one LM iteration can cost; ``per step``: brdffit's own solver
-  (:func:`brdffit.lm.solve_one`) run for exactly 6 steps from the same start at full
+  (:func:`brdffit.engine.lm.solve_one`) run for exactly 6 steps from the same start at full
   resolution (tolerances 0), its time over the 7 linearisations it makes at most;
 - ``--disney``: the warm default fit of Disney's model (default options) on a
   full-resolution material made from it (no scipy peer: there is no numpy Disney).
@@ -40,11 +40,12 @@ import time
 import numpy as np
 
 import brdffit
-from brdffit import fit, models, synthesize
-from brdffit.merl import merl_subgrid
-from brdffit.metrics import get_metric, keep_mask, prepare
-from brdffit.metrics import residuals as jax_residuals
-from brdffit.parameters import ParameterLayout
+from brdffit import models, synthesize
+from brdffit.core.parameters import ParameterLayout
+from brdffit.engine import fit
+from brdffit.engine.metrics import get_metric, keep_mask, prepare
+from brdffit.engine.metrics import residuals as jax_residuals
+from brdffit.io.merl import merl_subgrid
 
 TRUTH = {"kd": [0.12, 0.30, 0.55], "ks": [0.8, 0.8, 0.8], "f0": [0.9, 0.6, 0.3], "alpha": 0.12}
 
@@ -190,8 +191,8 @@ def per_step(layout, model, prep, x0, repeats, steps: int = 6) -> float:
     """Seconds per linearisation of brdffit's LM, ``steps`` tried steps from ``x0``."""
     import jax.numpy as jnp
 
-    from brdffit import lm
-    from brdffit.objective import Objective
+    from brdffit.engine import lm
+    from brdffit.engine.objective import Objective
 
     obj = Objective.build(model)
     z0 = obj.layout.solver_vector(layout.unpack(x0))

@@ -20,8 +20,9 @@ import time
 import numpy as np
 
 import brdffit
-from brdffit import fit, fit_many, models, synthesize
-from brdffit.metrics import get_metric
+from brdffit import fit_many, models, synthesize
+from brdffit.engine import fit
+from brdffit.engine.metrics import get_metric
 
 
 def materials(n: int, stride: tuple[int, int, int], seed: int = 0) -> list:

@@ -49,7 +49,7 @@ def cached(material: str) -> Path:
     """Path of the pickled full-resolution Measurements of ``material`` (made once)."""
     path = CACHE / f"{material}.pkl"
     if not path.exists():
-        from brdffit.loading import load_measurements
+        from brdffit.io.load import load_measurements
 
         CACHE.mkdir(exist_ok=True)
         data = load_measurements(NBRDF / f"{material}.json")
@@ -61,7 +61,8 @@ def cached(material: str) -> Path:
 
 def one_pair(model_name: str, metric: str, materials: list[str]) -> list[dict]:
     """Fit the first material cold, then every material warm, in this process; the rows."""
-    from brdffit import fit, models
+    from brdffit import models
+    from brdffit.engine import fit
 
     model = models.get(model_name)
     data = {m: pickle.loads(cached(m).read_bytes()) for m in materials}

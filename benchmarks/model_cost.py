@@ -20,7 +20,7 @@ import numpy as np
 
 import brdffit
 from brdffit import models
-from brdffit.geometry import uniform_hemisphere
+from brdffit.core.geometry import uniform_hemisphere
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 

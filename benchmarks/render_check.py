@@ -352,9 +352,8 @@ def main(argv: Sequence[str] | None = None) -> None:
     ap.add_argument("--append", action="store_true")
     args = ap.parse_args(argv)
 
-    from brdffit.models import split_specs
-
     import brdffit
+    from brdffit.models import split_specs
 
     specs = split_specs(args.models)
     results: dict[str, dict] = {}

@@ -3,7 +3,7 @@
 For each NBRDF material (``--materials``, default 24 spread over the alphabetical list of
 ``../shared/data/merl_nbrdf``) on a strided MERL grid, the cells are split into two
 halves by the parity of their (theta_h, theta_d) block (the blocks of
-``errors="blocks"``, :data:`brdffit.uncertainty.BLOCK_DEG`) (a checkerboard, so
+``errors="blocks"``, :data:`brdffit.engine.uncertainty.BLOCK_DEG`) (a checkerboard, so
 each half sees every region of the BRDF but no block of the other). The same model is
 fitted to each half, once per kind of standard error, and each free scalar gives
 
@@ -12,7 +12,7 @@ fitted to each half, once per kind of standard error, and each free scalar gives
 If the intervals mean what they say, |z| <= 1.96 for 95% of the scalars (the halves
 share no block, so under each interval's own assumptions the two estimates are
 independent). Model error that neighbouring cells share makes the per-sample sandwich
-far too narrow; ``errors="blocks"`` is built to admit it (:mod:`brdffit.uncertainty`).
+far too narrow; ``errors="blocks"`` is built to admit it (:mod:`brdffit.engine.uncertainty`).
 Scalars with no standard error (held on a bound) are left out and counted.
 
 Run: python3 benchmarks/split_halves.py [--model walter] [--metric low_e2]
@@ -29,11 +29,12 @@ from pathlib import Path
 import numpy as np
 
 import brdffit
-from brdffit import fit, models
-from brdffit.loading import load_measurements
-from brdffit.measurements import Measurements
-from brdffit.metrics import get_metric, keep_mask, prepare
-from brdffit.uncertainty import block_cells
+from brdffit import models
+from brdffit.core.measurements import Measurements
+from brdffit.engine import fit
+from brdffit.engine.metrics import get_metric, keep_mask, prepare
+from brdffit.engine.uncertainty import block_cells
+from brdffit.io.load import load_measurements
 
 NBRDF = Path(__file__).resolve().parents[2] / "shared" / "data" / "merl_nbrdf"
 KINDS = ("sandwich", "classic", "blocks")

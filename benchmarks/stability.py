@@ -27,7 +27,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the root: the tr
 
 import stress  # noqa: E402  (benchmarks/stress: the script's folder is on sys.path)
 
-from brdffit.atomic import write_text  # noqa: E402
+from brdffit.util.atomic import write_text  # noqa: E402
 
 
 def _names(ap: argparse.ArgumentParser, text: str, known: list[str], what: str) -> list[str]:
@@ -62,7 +62,7 @@ def main() -> None:
         print(f"# rescored {stress.rescore(out)} case(s)")
     elif not args.table:
         import brdffit
-        from brdffit.metrics import METRICS
+        from brdffit.engine.metrics import METRICS
 
         brdffit.enable_compilation_cache()
         models = _names(ap, args.models, sorted(stress.ROLES), "model")

@@ -17,7 +17,7 @@ from pathlib import Path
 import jax.numpy as jnp
 
 from brdffit import models
-from brdffit.abstract_model import AbstractModel
+from brdffit.core.abstract_model import AbstractModel
 
 
 @dataclass(frozen=True)

@@ -5,8 +5,8 @@ from __future__ import annotations
 import jax.numpy as jnp
 import numpy as np
 
-from brdffit.check import extreme_pairs, params_at_bounds  # noqa: F401  (re-exported)
-from brdffit.geometry import spherical_to_vector, uniform_hemisphere
+from brdffit.core.geometry import spherical_to_vector, uniform_hemisphere
+from brdffit.models.check import extreme_pairs, params_at_bounds  # noqa: F401  (re-exported)
 
 
 def random_pairs(seed: int, n: int) -> tuple[np.ndarray, np.ndarray]:

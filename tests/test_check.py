@@ -1,4 +1,4 @@
-"""brdffit.check and ``brdffit check``: real models pass, broken ones are flagged by name."""
+"""brdffit.models.check and ``brdffit check``: real models pass, broken ones are flagged by name."""
 
 from __future__ import annotations
 
@@ -7,14 +7,14 @@ from typing import ClassVar
 import jax
 import jax.numpy as jnp
 import pytest
+from brdffit.cli.commands import main
 
 from brdffit import models
-from brdffit.abstract_model import AbstractModel
-from brdffit.check import CheckRow, check_model, check_params, extreme_pairs, format_table
-from brdffit.cli import main
+from brdffit.core.abstract_model import AbstractModel
+from brdffit.core.geometry import ShadingGeometry
+from brdffit.core.parameters import Parameter, Params
 from brdffit.errors import ParameterError
-from brdffit.geometry import ShadingGeometry
-from brdffit.parameters import Parameter, Params
+from brdffit.models.check import CheckRow, check_model, check_params, extreme_pairs, format_table
 
 KD = Parameter("kd", (3,), (0.0, 1.0), 0.5, "logit", "diffuse albedo, RGB")
 ROUGH = Parameter("rough", (), (0.0, 1.0), 0.5, "logit", "a made-up roughness")
@@ -170,7 +170,7 @@ def test_cli_check_markdown_one_dtype(capsys):
 
 
 def test_cli_check_exits_1_when_a_check_fails(capsys, monkeypatch):
-    import brdffit.cli as cli
+    import brdffit.cli.commands as cli
 
     monkeypatch.setattr(cli, "_model", lambda name, options: SqrtRough())
     code = main(["check", "sqrt_rough", "--dtype", "float64"])

@@ -1,4 +1,4 @@
-"""Jobs on Dask (brdffit.cluster): every result recorded once, a lost worker's job run
+"""Jobs on Dask (brdffit.sweep.dask_runner): every result recorded once, a lost worker's job run
 again elsewhere, a bad scheduler address named."""
 
 from __future__ import annotations
@@ -10,8 +10,8 @@ import pytest
 
 pytest.importorskip("distributed")
 
-from brdffit.cluster import run_on_dask  # noqa: E402
 from brdffit.errors import ParameterError  # noqa: E402
+from brdffit.sweep.dask_runner import run_on_dask  # noqa: E402
 
 
 def square_or_die(job: tuple[int, str]) -> int:

@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from brdffit.crossrank import (
+from brdffit.errors import SweepError
+from brdffit.selection.crossrank import (
     aggregate,
     aggregate_table,
     family_table,
@@ -15,9 +16,8 @@ from brdffit.crossrank import (
     per_material_table,
     rank_matrix_figure,
 )
-from brdffit.errors import SweepError
-from brdffit.families import family_of
-from brdffit.pareto import error_vs_time, pareto_figure, pareto_front, pareto_table
+from brdffit.selection.families import family_of
+from brdffit.selection.pareto import error_vs_time, pareto_figure, pareto_front, pareto_table
 from tests.sweep_fixtures import TABLE, make_sweep
 
 

@@ -13,11 +13,11 @@ import numpy as np
 import pytest
 
 from brdffit import fit_many, models
+from brdffit.core.measurements import Measurements
+from brdffit.engine.metrics import get_metric, keep_mask, prepare
+from brdffit.engine.objective import Objective, block_moments, natural_moments
+from brdffit.engine.uncertainty import BLOCK_DEG, block_covariance, block_index
 from brdffit.errors import ParameterError
-from brdffit.measurements import Measurements
-from brdffit.metrics import get_metric, keep_mask, prepare
-from brdffit.objective import Objective, block_moments, natural_moments
-from brdffit.uncertainty import BLOCK_DEG, block_covariance, block_index
 from tests.helpers import random_pairs
 
 WI, WO = random_pairs(11, 4000)

@@ -13,9 +13,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from brdffit.cli.commands import build_parser, main
 
 from brdffit import models, synthesize
-from brdffit.cli import build_parser, main
 from brdffit.errors import BrdffitError, MissingDependencyError, ParameterError, SweepError
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -82,7 +82,7 @@ def test_sample_rejects_steps_and_walkers_it_cannot_run(capsys, good_csv, extra,
 
 def test_sample_library_names_the_argument():
     data = synthesize(models.get("lambert"), {"kd": [0.2, 0.2, 0.2]}, stride=(15, 15, 15))
-    from brdffit.sample import sample
+    from brdffit.engine.sample import sample
 
     with pytest.raises(ParameterError, match="n_steps"):
         sample(models.get("lambert"), data, n_steps=0, progress=False)
@@ -174,7 +174,7 @@ def test_garbage_npz_gets_our_message(capsys, tmp_path):
 
 def test_nbrdf_without_h5py_raises_missing_dependency(tmp_path, monkeypatch, capsys):
     pytest.importorskip("h5py")
-    from brdffit.nbrdf import read_nbrdf
+    from brdffit.io.nbrdf import read_nbrdf
     from tests.test_nbrdf import _architecture, _random_weights, _write_keras
 
     stem = _write_keras(tmp_path / "toy", _random_weights(), _architecture())
@@ -224,7 +224,7 @@ def test_report_skips_unreadable_result_files_and_lists_them(capsys, tmp_path):
 
 
 def test_sweep_folder_lock(tmp_path):
-    from brdffit.sweep import sweep_lock
+    from brdffit.sweep.run import sweep_lock
 
     with sweep_lock(tmp_path):
         with pytest.raises(SweepError, match="another sweep"):
@@ -276,8 +276,8 @@ def test_simplify_prints_progress_per_move(capsys, good_csv, tmp_path):
 
 def test_simplify_table_defers_a_change_taken_later():
     """A move refused at step 1 and taken at step 2 reads 'deferred', not 'kept'."""
-    from brdffit.reduction import DECISIONS, PathRow
-    from brdffit.simplify import _mark_deferred
+    from brdffit.selection.reduction import DECISIONS, PathRow
+    from brdffit.selection.simplify import _mark_deferred
 
     def row(step, change, decision):
         return PathRow(step, f"w[{change}]", change, 8, 1.0, 1.0, np.nan, np.nan, decision)

@@ -16,9 +16,10 @@ import xml.etree.ElementTree as ET
 
 import numpy as np
 import pytest
+from brdffit.cli.commands import main
 
 from brdffit import models, synthesize, write_merl
-from brdffit.cli import main
+from brdffit.core.result import FitResult
 from brdffit.export import (
     EXACT_TOL,
     ExportError,
@@ -29,7 +30,6 @@ from brdffit.export import (
     parse_targets,
     write_exports,
 )
-from brdffit.result import FitResult
 from tests.helpers import random_pairs
 
 F0 = [0.9, 0.6, 0.3]

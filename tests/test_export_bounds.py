@@ -22,7 +22,6 @@ import xml.etree.ElementTree as ET
 
 import numpy as np
 import pytest
-from brdffit.models._restrict import base_of
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -38,6 +37,7 @@ from brdffit.export import (
     write_exports,
 )
 from brdffit.export._numbers import FLOAT32_MAX, FLOAT32_TINY
+from brdffit.models._restrict import base_of
 from tests.test_export import (
     check_gltf_document,
     gltf_brdf,

@@ -11,11 +11,12 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from brdffit import FitError, FitResult, Status, fit, models, synthesize
+from brdffit import FitError, FitResult, Status, models, synthesize
+from brdffit.core.measurements import Measurements
+from brdffit.engine import fit
+from brdffit.engine.metrics import get_metric, prepare
+from brdffit.engine.objective import Objective
 from brdffit.errors import ParameterError
-from brdffit.measurements import Measurements
-from brdffit.metrics import get_metric, prepare
-from brdffit.objective import Objective
 from tests.cases import CASES
 
 TRUTH = {"kd": [0.1, 0.2, 0.3], "ks": [0.8, 0.7, 0.9], "f0": [0.9, 0.6, 0.3], "alpha": 0.15}
@@ -242,7 +243,7 @@ def test_a_fit_with_every_parameter_frozen_evaluates_and_reports():
 
 def test_fit_refuses_what_is_not_measurements_and_names_the_nbrdf_reader():
     # fit's own check (the test suite's type-check hook would stop the call first)
-    from brdffit.fit import require_measurements
+    from brdffit.engine.fit import require_measurements
 
     class NBRDF:  # stands for the network read_nbrdf returns
         pass
@@ -257,8 +258,8 @@ def test_fit_refuses_what_is_not_measurements_and_names_the_nbrdf_reader():
 def test_thinned_starts_keep_each_metrics_own_values():
     """A log metric leaves out a signed value below ln(1 + x)'s domain that a linear
     metric fits; thinning one metric's data like the other's must keep its own values."""
-    from brdffit.fit import _subset
-    from brdffit.metrics import prepare_all
+    from brdffit.engine.fit import _subset
+    from brdffit.engine.metrics import prepare_all
 
     data = synthesize(models.get("lambert"), {"kd": 0.5}, stride=9)
     values = np.array(data.values)
@@ -289,7 +290,7 @@ def test_thinned_starts_keep_each_metrics_own_values():
     ],
 )
 def test_the_starts_thin_mid_sized_data_to_a_quarter(n, coarse, want):
-    from brdffit.fit import coarse_size
+    from brdffit.engine.fit import coarse_size
 
     assert coarse_size(n, coarse) == want
 

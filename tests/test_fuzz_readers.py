@@ -14,11 +14,11 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from brdffit import models, synthesize, write_merl
+from brdffit.core.measurements import Measurements
 from brdffit.errors import BrdffitError
-from brdffit.measurements import Measurements
-from brdffit.merl import read_merl
-from brdffit.table import read_table
-from brdffit.tensor_file import rgl_header
+from brdffit.io.merl import read_merl
+from brdffit.io.rgl_header import rgl_header
+from brdffit.io.table import read_table
 
 FUZZ = settings(
     max_examples=25,
@@ -208,7 +208,7 @@ def nbrdf_seed(tmp_path_factory) -> Path:
 
 
 def _nbrdf(stem: Path):
-    from brdffit.nbrdf import read_nbrdf
+    from brdffit.io.nbrdf import read_nbrdf
 
     return read_nbrdf(stem)
 

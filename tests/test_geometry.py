@@ -8,7 +8,7 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from brdffit.geometry import (
+from brdffit.core.geometry import (
     MERL_SHAPE,
     above_horizon,
     fold_phi_d,

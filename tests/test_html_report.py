@@ -13,11 +13,11 @@ from pathlib import Path
 import matplotlib.pyplot as plt
 import numpy as np
 import pytest
+from brdffit.cli.commands import main
 
 from brdffit import FitResult, models, synthesize
-from brdffit.cli import main
-from brdffit.html_report import write_fit_html, write_sweep_html
-from brdffit.merl import MERL_SCALES
+from brdffit.io.merl import MERL_SCALES
+from brdffit.report.html import write_fit_html, write_sweep_html
 from tests.sweep_fixtures import make_sweep
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"

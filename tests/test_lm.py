@@ -19,9 +19,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.optimize import least_squares
 
-from brdffit import lm, metrics, models, synthesize
-from brdffit.measurements import Measurements
-from brdffit.objective import Objective, plain_residuals
+from brdffit import models, synthesize
+from brdffit.core.measurements import Measurements
+from brdffit.engine import lm, metrics
+from brdffit.engine.objective import Objective, plain_residuals
 
 TRUTH = {"kd": [0.1, 0.2, 0.3], "ks": [0.8, 0.7, 0.9], "f0": [0.9, 0.6, 0.3], "alpha": 0.15}
 

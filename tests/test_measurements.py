@@ -12,9 +12,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from brdffit import metrics
+from brdffit.core.measurements import Measurements
+from brdffit.engine import metrics
 from brdffit.errors import MeasurementsError
-from brdffit.measurements import Measurements
 
 
 def _dirs(n: int, seed: int) -> tuple[np.ndarray, np.ndarray]:

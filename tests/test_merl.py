@@ -11,15 +11,15 @@ import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
-from brdffit.errors import MeasurementFileError, MeasurementsError, ParameterError
-from brdffit.geometry import (
+from brdffit.core.geometry import (
     MERL_SHAPE,
     halfdiff_to_io,
     merl_bin_centres,
     merl_solid_angle_weights,
     spherical_to_vector,
 )
-from brdffit.merl import (
+from brdffit.errors import MeasurementFileError, MeasurementsError, ParameterError
+from brdffit.io.merl import (
     MERL_FILE_BYTES,
     MERL_N_CELLS,
     MERL_SCALES,
@@ -327,7 +327,7 @@ def _brute_force_cells(wi: np.ndarray, wo: np.ndarray) -> tuple[np.ndarray, np.n
     """Nearest MERL bin centre per (n, 3) pair by exhaustive search over each axis.
 
     Angles come from the frame of the half vector (``d = (wi.ex, wi.ey, wi.h)``), not
-    from :mod:`brdffit.geometry`. Returns the flat cell index and a mask that is False
+    from :mod:`brdffit.core.geometry`. Returns the flat cell index and a mask that is False
     where the bin is ambiguous (left to round-off).
     """
     h = (wi + wo) / np.linalg.norm(wi + wo, axis=1, keepdims=True)

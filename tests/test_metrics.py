@@ -8,8 +8,8 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from brdffit import metrics
-from brdffit.measurements import Measurements
+from brdffit.core.measurements import Measurements
+from brdffit.engine import metrics
 from tests.helpers import random_pairs
 
 

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from brdffit import models
-from brdffit.geometry import spherical_to_vector
+from brdffit.core.geometry import spherical_to_vector
 from tests.helpers import random_pairs
 
 # A few fixed direction pairs: generic, near-mirror, normal incidence (h = n), grazing.

@@ -15,9 +15,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from brdffit.models import brady
 
 from brdffit import models
+from brdffit.models import brady
 from tests.helpers import random_pairs
 
 PARAMS = {"kd": [0.1, 0.2, 0.3], "ks": [2.0, 1.5, 1.0], "f0": 0.1, "beta": 0.4, "exponent": 1.2}

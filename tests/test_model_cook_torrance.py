@@ -8,9 +8,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from brdffit.models import _terms
 
 from brdffit import models
+from brdffit.models import _terms
 from tests.helpers import half_vector_albedo
 
 COS = np.linspace(0.0, 1.0, 41)

@@ -14,10 +14,10 @@ import jax.extend.core as jex
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from brdffit.models import disney
 
 from brdffit import models
-from brdffit.geometry import shading_geometry
+from brdffit.core.geometry import shading_geometry
+from brdffit.models import disney
 from tests.cases import CASES
 from tests.helpers import random_pairs
 

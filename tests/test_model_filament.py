@@ -8,9 +8,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from brdffit.models import _terms, filament
 
 from brdffit import models
+from brdffit.models import _terms, filament
 from tests.helpers import hemisphere_integral
 
 PI = np.pi

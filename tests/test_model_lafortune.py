@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from brdffit import models
+from brdffit.core.geometry import spherical_to_vector
 from brdffit.errors import ParameterError
-from brdffit.geometry import spherical_to_vector
 from tests.helpers import random_pairs
 
 PARAMS = {

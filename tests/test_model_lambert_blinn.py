@@ -5,9 +5,9 @@ from __future__ import annotations
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from brdffit.models.blinn_phong import blinn_lobe
 
 from brdffit import models
+from brdffit.models.blinn_phong import blinn_lobe
 from tests.helpers import hemisphere_integral, random_pairs
 
 

@@ -7,11 +7,12 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from brdffit.models import low
 from scipy import integrate
 
-from brdffit import fit, models
-from brdffit.measurements import Measurements
+from brdffit import models
+from brdffit.core.measurements import Measurements
+from brdffit.engine import fit
+from brdffit.models import low
 from tests.helpers import hemisphere_integral, random_pairs
 
 # Fixed direction pairs: normal, oblique, near mirror, wide, grazing-ish, anisotropic azimuths.

@@ -8,10 +8,10 @@ import jax.numpy as jnp
 import mpmath
 import numpy as np
 import pytest
-from brdffit.models.nishino_lombardi import hemi_epd
 
 from brdffit import models
-from brdffit.geometry import spherical_to_vector
+from brdffit.core.geometry import spherical_to_vector
+from brdffit.models.nishino_lombardi import hemi_epd
 
 UP = jnp.array([[0.0, 0.0, 1.0]])
 

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from brdffit import models
-from brdffit.geometry import uniform_hemisphere
+from brdffit.core.geometry import uniform_hemisphere
 
 VARIANTS = ["qualitative", "full"]
 

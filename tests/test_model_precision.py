@@ -5,12 +5,12 @@ is checked with its default options and parameters), ``model.eval`` in float64 i
 with an independent transcription of the model's published formula evaluated in mpmath at 40
 digits (``tests/references.py`` and any ``tests/references_<name>.py``), on
 
-- directions: the 11 pairs of :func:`brdffit.check.extreme_pairs` (normal, grazing at
+- directions: the 11 pairs of :func:`brdffit.models.check.extreme_pairs` (normal, grazing at
   cos 1e-6, wi = wo, mirror), 9 more near-mirror and grazing-mirror pairs (below) and 12
   uniform random pairs;
 - parameters: the row's values, every parameter at its lower bound, every one at its upper
   bound, each parameter alone at each of its bounds with the others at the row's values
-  (an infinite bound stands in as 1e6, as in ``brdffit.check``), and per-model extra sets
+  (an infinite bound stands in as 1e6, as in ``brdffit.models.check``), and per-model extra sets
   (:data:`EXTRA_SETS`).
 
 Rules, per RGB value (``verdict``):
@@ -36,8 +36,8 @@ import numpy as np
 import pytest
 
 from brdffit import models
-from brdffit.check import GRAZING_COS, extreme_pair_names, extreme_pairs, params_at_bounds
-from brdffit.geometry import spherical_to_vector
+from brdffit.core.geometry import spherical_to_vector
+from brdffit.models.check import GRAZING_COS, extreme_pair_names, extreme_pairs, params_at_bounds
 from tests import references
 from tests.cases import CASES, Case
 from tests.helpers import random_pairs

@@ -15,7 +15,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from brdffit.check import check_params
+from brdffit.models.check import check_params
 from tests.cases import CASES
 from tests.helpers import params_at_bounds, random_pairs, random_params, rotate_z
 
@@ -78,7 +78,7 @@ def test_isotropic_models_ignore_rotation_about_normal(case):
 @pytest.mark.parametrize("which", ["case", "low", "high"])
 @pytest.mark.parametrize("case", _heavy_rows_slow())
 def test_extremes_finite_value_and_gradient(case, which, dtype):
-    """brdffit.check on the extreme pairs: finite, non-negative f and finite d sum(f)/dp."""
+    """brdffit.models.check on the extreme pairs: finite, non-negative f and finite d sum(f)/dp."""
     model, params = case.build()
     if which != "case":
         params = params_at_bounds(model, which)

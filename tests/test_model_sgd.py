@@ -15,11 +15,11 @@ import jax.numpy as jnp
 import mpmath as mp
 import numpy as np
 import pytest
-from brdffit.models import _terms, sgd
 from scipy import integrate
 
 from brdffit import models
-from brdffit.check import extreme_pairs
+from brdffit.models import _terms, sgd
+from brdffit.models.check import extreme_pairs
 from tests.helpers import hemisphere_integral, random_pairs
 from tests.references_sgd import REFERENCES, slope_density, smith_lambda
 

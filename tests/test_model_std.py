@@ -21,11 +21,11 @@ import jax.numpy as jnp
 import mpmath as mp
 import numpy as np
 import pytest
-from brdffit.models import _terms, std
 from scipy import special
 
 from brdffit import models
-from brdffit.check import extreme_pairs, params_at_bounds
+from brdffit.models import _terms, std
+from brdffit.models.check import extreme_pairs, params_at_bounds
 from tests.cases import CASES
 from tests.helpers import random_pairs
 from tests.references_std import reference

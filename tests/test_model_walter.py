@@ -21,12 +21,13 @@ import jax.numpy as jnp
 import mitsuba as mi
 import numpy as np
 import pytest
-from brdffit.models import _terms
 from scipy import integrate, special
 
-from brdffit import fit, models
-from brdffit.geometry import uniform_hemisphere
-from brdffit.synthetic import synthesize
+from brdffit import models
+from brdffit.core.geometry import uniform_hemisphere
+from brdffit.engine import fit
+from brdffit.io.synthetic import synthesize
+from brdffit.models import _terms
 from tests.helpers import hemisphere_integral
 
 mi.set_variant("scalar_rgb")

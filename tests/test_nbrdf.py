@@ -15,10 +15,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from brdffit.core.geometry import MERL_SHAPE, halfdiff_to_io
 from brdffit.errors import MeasurementFileError
-from brdffit.geometry import MERL_SHAPE, halfdiff_to_io
-from brdffit.merl import merl_grid, read_merl
-from brdffit.nbrdf import NBRDF, nbrdf_to_merl, read_nbrdf
+from brdffit.io.merl import merl_grid, read_merl
+from brdffit.io.nbrdf import NBRDF, nbrdf_to_merl, read_nbrdf
 
 h5py = pytest.importorskip("h5py")
 

@@ -7,12 +7,12 @@ import math
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from brdffit.models._restrict import make_neutral
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from brdffit import ParameterError, models
-from brdffit.parameters import Parameter
+from brdffit.core.parameters import Parameter
+from brdffit.models._restrict import make_neutral
 from tests.cases import CASES
 from tests.helpers import random_pairs
 
@@ -76,7 +76,7 @@ def test_a_neutral_value_outside_the_bounds_is_a_typed_error():
 
 
 def _low_layout(freeze=None):
-    from brdffit.objective import Objective
+    from brdffit.engine.objective import Objective
 
     return Objective.build(models.get("low"), freeze).layout
 

@@ -7,9 +7,9 @@ import re
 import shutil
 
 import pytest
+from brdffit.cli.commands import main
 
-from brdffit.cli import main
-from brdffit.report import write_report
+from brdffit.report.markdown import write_report
 from tests.sweep_fixtures import TABLE, make_sweep
 
 # four steels (one family, so clustered) with a tie for first on steel-2 and steel-4

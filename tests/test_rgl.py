@@ -16,16 +16,17 @@ import json
 
 import numpy as np
 import pytest
+from brdffit.cli.commands import main
 
 import brdffit
-from brdffit import models, rgl
-from brdffit.cli import main
+from brdffit import models
+from brdffit.core.geometry import MERL_SHAPE
 from brdffit.errors import MeasurementFileError, MissingDependencyError, ParameterError
-from brdffit.geometry import MERL_SHAPE
-from brdffit.loading import load_measurements
-from brdffit.merl import merl_grid, read_merl, write_merl
-from brdffit.rgl import read_rgl, read_rgl_at, rgl_header
-from brdffit.sweep import rgl_materials
+from brdffit.io import rgl
+from brdffit.io.load import load_measurements
+from brdffit.io.merl import merl_grid, read_merl, write_merl
+from brdffit.io.rgl import read_rgl, read_rgl_at, rgl_header
+from brdffit.sweep.run import rgl_materials
 from tests import rgl_fixture as fx
 
 pytest.importorskip("mitsuba")  # the reader evaluates files through it

@@ -18,7 +18,7 @@ import pytest
 
 from benchmarks import stress
 from brdffit import models
-from brdffit.metrics import get_metric, prepare
+from brdffit.engine.metrics import get_metric, prepare
 
 
 @pytest.mark.parametrize(
@@ -281,7 +281,7 @@ def test_an_albedo_next_to_a_near_mirror_lobe_is_solved_not_crawled():
     # Cook-Torrance at m = 1e-3 under the Ngan metric, from the suite's first random
     # start. kd's column of J is ~1e-5 of the lobe's: under uniform damping (the old
     # chunked fitter) the fit ended MAX_STEPS with kd[r] at 0.134 (truth 0.101).
-    # Marquardt's column scaling in brdffit.lm makes the damping blind to that.
+    # Marquardt's column scaling in brdffit.engine.lm makes the damping blind to that.
     spec, r = _suite_fit("cook_torrance", "near_mirror", 0)
     assert r.converged and r.n_steps <= 128, (r.status, r.n_steps)
     np.testing.assert_allclose(r.params["kd"], spec.truth["kd"], rtol=1e-4)
@@ -303,7 +303,7 @@ def test_a_linear_metric_gets_a_start_descended_under_a_log_one():
     # Lafortune on grazing-dominated data with the 80 degree cut, under the Ngan metric,
     # from the suite's first random start: with every start descended under ngan alone
     # the old fitter ended in a corner (kd = rho_1 = 0, cxy_1 at -1.3e21). The
-    # cross-metric start (brdffit.starts.OTHER_METRIC) is one of the starts since.
+    # cross-metric start (brdffit.engine.starts.OTHER_METRIC) is one of the starts since.
     spec, r = _suite_fit("lafortune", "grazing_cut80", 0)
     assert r.converged, (r.status, r.loss)
     for name in ("cxy_1", "n_1", "rho_1", "kd"):

@@ -16,14 +16,14 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from brdffit.cli.commands import main
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 from brdffit import models
-from brdffit.cli import main
-from brdffit.crossrank import load_sweep, matrices
 from brdffit.errors import ParameterError, SweepError
-from brdffit.sweep import Material, checkout_commit, file_stem, run_sweep, synthetic_materials
+from brdffit.selection.crossrank import load_sweep, matrices
+from brdffit.sweep.run import Material, checkout_commit, file_stem, run_sweep, synthetic_materials
 
 ROOT = Path(__file__).resolve().parents[1]
 ARGS = dict(stride=(15, 15, 15), n_restarts=0, eval_n=4096)
@@ -40,7 +40,7 @@ def test_killed_sweep_resumes_without_redoing_work(tmp_path):
     # test_cluster's; a LocalCluster here only added two workers' start and compilation.
     # Lambert: the cheapest model to compile (walter took 49 s here, nearly all of it
     # compiling twice); each fit still writes its JSON and times its evaluation
-    cmd = [sys.executable, "-m", "brdffit.cli", "sweep", str(out), "--synthetic", "6"]
+    cmd = [sys.executable, "-m", "brdffit.cli.commands", "sweep", str(out), "--synthetic", "6"]
     cmd += ["--models", "lambert", "--metrics", "low_e2", "--stride", "15", "15", "15"]
     cmd += ["--restarts", "0", "--jobs", "1", "--no-progress"]
     # eval_n is not a CLI option; the in-process resume below must match the default
@@ -257,7 +257,7 @@ def test_a_variant_is_fitted_resumed_and_ranked_as_its_own_model(tmp_path):
 
 
 def test_sweep_cli_splits_models_outside_brackets(tmp_path, monkeypatch, capsys):
-    import brdffit.sweep as sweep
+    import brdffit.sweep.run as sweep
 
     seen = {}
 

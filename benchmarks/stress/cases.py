@@ -13,8 +13,8 @@ import numpy as np
 
 import brdffit
 from brdffit import models as registry
-from brdffit.geometry import halfdiff_to_io
-from brdffit.measurements import Measurements
+from brdffit.core.geometry import halfdiff_to_io
+from brdffit.core.measurements import Measurements
 
 from .regimes import EXPONENT_RANGE, N_SAMPLES, ROLES, START_U, Regime
 

@@ -6,8 +6,8 @@ import json
 import os
 from pathlib import Path
 
-from brdffit.atomic import write_text
-from brdffit.result import nan_to_none
+from brdffit.core.result import nan_to_none
+from brdffit.util.atomic import write_text
 
 from .regimes import REGIMES
 

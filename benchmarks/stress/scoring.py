@@ -14,11 +14,11 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
-from brdffit import metrics
 from brdffit import models as registry
-from brdffit.fit import fit
-from brdffit.metrics import get_metric, prepare
-from brdffit.result import FitResult
+from brdffit.core.result import FitResult
+from brdffit.engine import metrics
+from brdffit.engine.fit import fit
+from brdffit.engine.metrics import get_metric, prepare
 
 from .cases import CaseSpec, case_spec, case_start, fitter_version, make_data, not_applicable
 from .files import is_finished, write_case

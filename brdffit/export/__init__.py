@@ -56,7 +56,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from brdffit import models
-from brdffit.atomic import write_text
+from brdffit.core.result import FitResult
 from brdffit.errors import ExportError, ExportValueError
 from brdffit.export import _numbers, gltf, materialx, mitsuba
 from brdffit.export._match import (
@@ -71,7 +71,7 @@ from brdffit.export._match import (
     relative_rms,
 )
 from brdffit.models._restrict import Restricted, base_of
-from brdffit.result import FitResult
+from brdffit.util.atomic import write_text
 
 TARGETS: dict[str, types.ModuleType] = {"mitsuba": mitsuba, "gltf": gltf, "materialx": materialx}
 """Target name -> module with ``candidates(model, params)`` and ``finish(...)``."""

@@ -31,7 +31,7 @@ import numpy as np
 from scipy.optimize import least_squares
 from scipy.stats import qmc
 
-from brdffit.geometry import halfdiff_to_io
+from brdffit.core.geometry import halfdiff_to_io
 
 N_DIRECTIONS = 4096
 """Halton points drawn; those with a direction beyond :data:`CUT_DEG` are dropped."""

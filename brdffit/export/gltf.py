@@ -28,13 +28,13 @@ from collections.abc import Mapping
 
 import numpy as np
 
-import brdffit
-from brdffit.abstract_model import AbstractModel
+from brdffit.core.abstract_model import AbstractModel
+from brdffit.core.result import FitResult
 from brdffit.export import gltf_brdf
 from brdffit.export._match import Family, Match, Slot
 from brdffit.export.mitsuba import generic_alpha
 from brdffit.models import label
-from brdffit.result import FitResult
+from brdffit.util.version import __version__
 
 Start = tuple[Family, dict[str, object]]
 
@@ -246,7 +246,7 @@ def finish(result: FitResult, model: AbstractModel, m: Match) -> tuple[dict, dic
     mat["extras"] = {
         "brdffit": {"model": name, "source": result.source, "exact": m.exact, "error": m.error}
     }
-    doc = {"asset": {"version": "2.0", "generator": f"brdffit {brdffit.__version__}"}}
+    doc = {"asset": {"version": "2.0", "generator": f"brdffit {__version__}"}}
     used = sorted(mat.get("extensions", {}))
     doc |= ({"extensionsUsed": used} if used else {}) | {"materials": [mat]}
     notes = [

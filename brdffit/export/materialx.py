@@ -29,11 +29,11 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from brdffit.abstract_model import AbstractModel
+from brdffit.core.abstract_model import AbstractModel
+from brdffit.core.result import FitResult
 from brdffit.export import gltf_brdf, mitsuba_bsdf
 from brdffit.export._match import Family, Match, Slot
 from brdffit.models import label
-from brdffit.result import FitResult
 
 Start = tuple[Family, dict[str, object]]
 VERSION = "1.39"

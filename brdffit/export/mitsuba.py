@@ -61,11 +61,11 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from brdffit.abstract_model import AbstractModel
+from brdffit.core.abstract_model import AbstractModel
+from brdffit.core.result import FitResult
 from brdffit.export import mitsuba_bsdf as mb
 from brdffit.export._match import Family, Match, Slot
 from brdffit.export.mitsuba_xml import to_xml
-from brdffit.result import FitResult
 
 Start = tuple[Family, dict[str, object]]
 

@@ -1,0 +1,185 @@
+"""Where a fit starts: the start policy, separate from the solver.
+
+The candidates, in order (every one with its affine parameters solved, see
+:func:`linear_start`):
+
+1. the defaults, or the user's ``init``;
+2. ``n_restarts`` seeded random draws of the nonlinear parameters near the first
+   (``N(0, 1)`` in each parameter's unconstrained space);
+3. the ``SCREEN_KEEP`` cheapest of ``screen`` candidates spread over the nonlinear
+   parameters' whole ranges (a space-filling screen: a local descent started with a
+   lobe far too wide or too narrow can end in a corner minimum; the cost over
+   candidates spread across the range finds the right basin for a few dozen model
+   evaluations);
+4. with the screen on, the *cross-metric start*: the same candidates selected and
+   descended under the other kind of metric (:data:`OTHER_METRIC`), the lowest of
+   those with its affine parameters solved again under the fit's own metric.
+
+:func:`draws` makes the candidates (they depend on the seed only); :func:`select` solves
+their affine parameters on one problem's data and keeps the screen's cheapest.
+:func:`brdffit.fit` races their descents (successive halving, :func:`brdffit.engine.lm.race`;
+one compiled solve) on thinned samples and finishes the best on all samples; the
+cross-metric start's candidates are raced the same way under the other metric.
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from brdffit.core.abstract_model import linear_split
+from brdffit.core.parameters import ParameterLayout, Params
+from brdffit.engine.metrics import Prepared
+from brdffit.engine.objective import Objective
+
+SCREEN_KEEP = 8
+"""Screened candidates kept as starts: the cheapest at the candidate is not always the
+one that descends lowest (Low's model with 30% noise: the cheapest ends in a
+Fresnel-saturated corner, the second cheapest at the optimum), so several go on."""
+
+OTHER_METRIC = {False: "low_e2", True: "ngan"}
+"""The cross-metric start's metric, keyed on whether the fit's metric is a log one.
+
+Under a metric linear in the BRDF (``ngan``, ``low_e1``) a narrow specular peak
+dominates the loss and the loss is flat in the lobe's width until the lobe covers the
+peak: Disney's near-mirror stress case (alpha = 1.1e-3) under ngan recovered 4 to 5 of
+20 random starts without this start. Under ``low_e2``'s ``ln(1 + f cos)`` the peak is
+compressed and its basin is wide. The other way round, a log metric all but ignores
+how high a 1e7 peak stands over the floor, and ``ngan`` weighs it."""
+
+RIDGE = 1e-12
+"""Tikhonov term of the affine normal equations, relative to their largest diagonal
+entry: keeps a basis column the data do not see at zero instead of a division by zero,
+and moves the others by about this much relative (float64 rounds at 1e-16)."""
+
+
+def linear_start(obj: Objective, z: jax.Array, prep: Prepared) -> jax.Array:
+    """``z`` with the affine parameters (``Parameter.linear``) solved, clipped into the box.
+
+    Weighted linear least squares of ``f cos`` with the metric's weights; for a log1p
+    metric each sample is further weighted by ``1 / (1 + f_data cos)``, the slope of
+    ``ln(1 + x)``, so the solve is the linearised log-space fit. The normal equations
+    (k x k, k the affine scalars) are solved by Cholesky.
+    """
+    layout = obj.layout
+    names = tuple(p.name for p in layout.free if p.linear and not p.solver_log)
+    if not names:
+        return z
+    f0, basis = linear_split(obj.model, obj.params(z), prep.g, names)
+    w = jnp.sqrt(prep.weight) * prep.cos_i[:, None]
+    slope = 1.0 / (1.0 + jnp.maximum(prep.values * prep.cos_i[:, None], 0.0))
+    w = jnp.where(prep.log1p, w * slope, w)
+    a = (basis * w[:, :, None]).reshape(-1, basis.shape[-1])
+    b = ((prep.values - f0) * w).ravel()
+    ata = a.T @ a
+    ridge = RIDGE * jnp.max(jnp.diag(ata)) * jnp.eye(ata.shape[0], dtype=ata.dtype)
+    x = jax.scipy.linalg.cho_solve((jnp.linalg.cholesky(ata + ridge), True), a.T @ b)
+    # the affine scalars sit in z in the order their names (and x) have
+    where = np.flatnonzero(np.concatenate([np.full(p.size, p.name in names) for p in layout.free]))
+    out = z.at[where].set(x)
+    lo, hi = layout.solver_bounds()
+    out = jnp.clip(out, lo, hi)
+    return jnp.where(jnp.all(jnp.isfinite(out)), out, z)
+
+
+def _near(layout: ParameterLayout, base: Params, rng: np.random.Generator) -> Params:
+    """The nonlinear parameters of ``base`` moved ``N(0, 1)`` in unconstrained space."""
+    out = dict(base)
+    for p in layout.free:
+        if not p.linear:
+            u = np.asarray(p.to_unconstrained(jnp.asarray(base[p.name])))
+            out[p.name] = p.to_natural(jnp.asarray(u + rng.normal(0.0, 1.0, p.shape)))
+    return out
+
+
+def _spread(
+    layout: ParameterLayout, base: Params, n: int, rng: np.random.Generator
+) -> list[dict[str, object]]:
+    """``n`` candidates filling the nonlinear parameters' ranges (affine ones as ``base``).
+
+    A scrambled Sobol sequence (``scipy.stats.qmc``) gives each nonlinear scalar a
+    quantile ``q`` in (0, 1), mapped so that the candidates cover the range evenly: a
+    scalar whose transform saturates at ``t = 0.02 + 0.96 q``, ``t = sigmoid(u)``
+    (log-uniform over the span of a bounded log parameter); an identity parameter with
+    finite bounds at the same share of its box (both signs of Lafortune's lobe axes);
+    an unbounded one at ``u = u_base + 2 Phi^-1(q)`` around ``base``.
+    """
+    from scipy.special import ndtri
+    from scipy.stats import qmc
+
+    shape_free = [p for p in layout.free if not p.linear]
+    dim = sum(p.size for p in shape_free)
+    q = qmc.Sobol(dim, scramble=True, seed=rng).random(n) if dim else np.zeros((n, 0))
+    out = [dict(base) for _ in range(n)]
+    i = 0
+    for p in shape_free:
+        qp = q[:, i : i + p.size].reshape((n,) + p.shape)
+        t = 0.02 + 0.96 * qp
+        lo, hi = p.bounds
+        if p.saturates:
+            x = np.asarray(p.to_natural(jnp.asarray(np.log(t) - np.log1p(-t))))
+        elif p.transform == "identity" and np.isfinite(lo) and np.isfinite(hi):
+            x = lo + (hi - lo) * t
+        else:
+            u = np.asarray(p.to_unconstrained(jnp.asarray(base[p.name])))
+            x = np.asarray(p.to_natural(jnp.asarray(u + 2.0 * ndtri(qp))))
+        for c, row in zip(out, x, strict=True):
+            c[p.name] = row
+        i += p.size
+    return out
+
+
+def draws(
+    layout: ParameterLayout,
+    first: Params,
+    *,
+    n_restarts: int,
+    screen: int,
+    rng: np.random.Generator,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The candidates before any data are seen, in solver space: ``(near, spread)``.
+
+    ``near`` (1 + n_restarts, k): the first start and the random draws near it;
+    ``spread`` (screen, k): the screen's candidates (none when ``screen`` is 0 or every
+    free parameter is affine). They depend on the seed only, so many problems share them.
+    """
+    near = [first] + [_near(layout, first, rng) for _ in range(n_restarts)]
+    spread = []
+    if screen and any(not p.linear for p in layout.free):
+        spread = _spread(layout, first, screen, rng)
+    k = layout.size
+    return _stack(layout, near), _stack(layout, spread) if spread else np.zeros((0, k))
+
+
+def select(obj: Objective, near: jax.Array, spread: jax.Array, prep: Prepared) -> jax.Array:
+    """The starts (S, k) on ``prep``: every ``near`` row and the ``SCREEN_KEEP`` cheapest
+    ``spread`` rows, each with its affine parameters solved (traceable; a candidate with
+    a non-finite cost sorts last and, if kept, loses its descent)."""
+    solve = jax.vmap(lambda z: linear_start(obj, z, prep))
+    out = solve(near)
+    if spread.shape[0] == 0:
+        return out
+    zs = solve(spread)
+    costs = jax.vmap(lambda z: obj.cost(z, prep))(zs)
+    costs = jnp.where(jnp.isfinite(costs), costs, jnp.inf)
+    order = jnp.argsort(costs, stable=True)[: min(SCREEN_KEEP, spread.shape[0])]
+    return jnp.concatenate([out, zs[order]])
+
+
+@eqx.filter_jit
+def linear_start_one(obj: Objective, z: jax.Array, prep: Prepared) -> jax.Array:
+    """:func:`linear_start` compiled for one problem."""
+    return linear_start(obj, z, prep)
+
+
+@eqx.filter_jit
+def select_one(obj: Objective, near: jax.Array, spread: jax.Array, prep: Prepared) -> jax.Array:
+    """:func:`select` compiled for one problem."""
+    return select(obj, near, spread, prep)
+
+
+def _stack(layout: ParameterLayout, params: list[dict[str, object]]) -> np.ndarray:
+    """Natural dicts -> (n, k) solver-space rows (:meth:`ParameterLayout.solver_vector`)."""
+    return np.stack([layout.solver_vector(p) for p in params]).reshape(len(params), layout.size)

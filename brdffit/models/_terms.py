@@ -1,0 +1,212 @@
+"""Terms shared by several models: diffuse lobes, microfacet distributions, masking, Fresnel,
+and the parameter rows of the seed table's weighted Fresnel ``rho_s F``.
+
+Each is a small pure JAX function of cosines or half-vector components from
+:class:`~brdffit.core.geometry.ShadingGeometry`; inputs below the horizon are already
+replaced by safe placeholders there, so no guard here needs a ``where`` against them.
+Roughness ``alpha`` follows Walter et al. 2007 (GGX ``alpha_g``, Beckmann ``alpha_b``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import jax
+import jax.numpy as jnp
+
+from brdffit.core.parameters import Parameter, Params
+
+INV_PI = 0.3183098861837907
+DIELECTRIC_F0 = 0.04
+"""Normal-incidence reflectance of a common dielectric, ``((1.5 - 1) / (1.5 + 1))^2``:
+glass, plastics and paints reflect 2-5% (Hoffman, "Background: Physics and Math of
+Shading", SIGGRAPH 2013 course notes, table of F0 values); the neutral value of every
+Schlick ``F0`` (Disney's ``specular`` 0.5 and Filament's ``reflectance`` 0.5 mean it)."""
+DIELECTRIC_ETA = 1.5
+"""Relative index of refraction of that common dielectric: the neutral ``eta``."""
+
+F0 = Parameter(
+    "f0",
+    (3,),
+    (0.0, 1.0),
+    0.04,
+    "logit",
+    "Fresnel reflectance at normal incidence, RGB",
+    linear=True,
+    neutral=DIELECTRIC_F0,
+)
+# With ks, f0 multiplies ks: the model is affine in each alone, not in both, so only
+# ks is solved linearly.
+F0_WEIGHTED = dataclasses.replace(F0, linear=False)
+KS = Parameter("ks", (3,), (0.0, 1.0), 0.9, "logit", "specular weight rho_s, RGB", linear=True)
+
+
+def fresnel_rows(weighted: bool) -> tuple[Parameter, ...]:
+    """Table rows of the specular colour: ``(ks, f0)`` with the weight, else ``(f0,)``."""
+    return (KS, F0_WEIGHTED) if weighted else (F0,)
+
+
+def weighted_schlick(params: Params, cos_d: jax.Array, weighted: bool) -> jax.Array:
+    """``ks F`` (or ``F``) with Schlick's ``F`` of RGB ``f0`` (:func:`schlick_fresnel`), (N, 3)."""
+    f = schlick_fresnel(params["f0"], cos_d)
+    return params["ks"][None, :] * f if weighted else f
+
+
+def lambert(albedo: jax.Array) -> jax.Array:
+    """Lambertian BRDF ``albedo / pi`` (1/sr), shape (1, 3); ``albedo`` RGB in [0, 1]."""
+    return albedo[None, :] * INV_PI
+
+
+def schlick_fresnel(f0: jax.Array, cos_d: jax.Array) -> jax.Array:
+    """Schlick (1994): ``F0 + (1 - F0)(1 - cos_d)^5``; ``f0`` (3,) and ``cos_d`` (N,) -> (N, 3)."""
+    s = (1.0 - cos_d) ** 5
+    return f0[None, :] * (1.0 - s)[:, None] + s[:, None]
+
+
+def slope_norm2(h: jax.Array, alpha_x: jax.Array, alpha_y: jax.Array) -> jax.Array:
+    """``(hx/ax)^2 + (hy/ay)^2``, the squared slope of ``h`` stretched by the roughness."""
+    return (h[:, 0] / alpha_x) ** 2 + (h[:, 1] / alpha_y) ** 2
+
+
+def ggx_d(h: jax.Array, alpha_x: jax.Array, alpha_y: jax.Array) -> jax.Array:
+    """GGX / Trowbridge-Reitz NDF (1/sr), anisotropic form (Heitz 2014, eq. 85).
+
+    ``D = 1 / (pi ax ay ((hx/ax)^2 + (hy/ay)^2 + hz^2)^2)``; equals Walter et al. 2007
+    eq. 33 ``a^2 / (pi cos^4 (a^2 + tan^2)^2)`` for ``ax = ay = a``, written without
+    ``1 - cos^2`` so that it keeps its precision for alpha near 1e-4.
+    """
+    t = slope_norm2(h, alpha_x, alpha_y) + h[:, 2] ** 2
+    return INV_PI / (alpha_x * alpha_y * t**2)
+
+
+def beckmann_d(h: jax.Array, alpha_x: jax.Array, alpha_y: jax.Array) -> jax.Array:
+    """Beckmann NDF (1/sr): ``exp(-((hx/ax)^2 + (hy/ay)^2)/hz^2) / (pi ax ay hz^4)``.
+
+    Walter et al. 2007 eq. 25 in its anisotropic form; goes to 0 as ``hz -> 0``
+    because the exponential wins (``hz`` is > 0 for every reflection half vector).
+    """
+    hz2 = h[:, 2] ** 2
+    # Evaluated in log space: the float32 derivative of 1/(ax ay hz^4) underflows to
+    # -inf at grazing h and would meet exp(...) = 0 as NaN. The total exponent is
+    # floored at -700, where exp underflows (D < 1e-304), so the derivative is 0 there.
+    log_d = (
+        -slope_norm2(h, alpha_x, alpha_y) / hz2
+        - jnp.log(jnp.pi * alpha_x * alpha_y)
+        - 2.0 * jnp.log(hz2)
+    )
+    return jnp.exp(jnp.maximum(log_d, -700.0))
+
+
+def projected_roughness2_tan2(v: jax.Array, alpha_x: jax.Array, alpha_y: jax.Array) -> jax.Array:
+    """``alpha(phi)^2 tan^2(theta)`` of direction ``v``: ``(ax^2 vx^2 + ay^2 vy^2) / vz^2``."""
+    return ((alpha_x * v[:, 0]) ** 2 + (alpha_y * v[:, 1]) ** 2) / v[:, 2] ** 2
+
+
+def ggx_lambda(v: jax.Array, alpha_x: jax.Array, alpha_y: jax.Array) -> jax.Array:
+    """Smith Lambda for GGX: ``(sqrt(1 + a^2 tan^2) - 1) / 2``, written cancellation-free."""
+    x = projected_roughness2_tan2(v, alpha_x, alpha_y)
+    return 0.5 * x / (jnp.sqrt(1.0 + x) + 1.0)
+
+
+def beckmann_lambda(v: jax.Array, alpha_x: jax.Array, alpha_y: jax.Array) -> jax.Array:
+    """Exact Smith Lambda for Beckmann: ``(exp(-a^2)/(a sqrt(pi)) - erfc(a)) / 2``.
+
+    ``a = 1 / (alpha tan theta)``; ``a`` is capped at 30 (Lambda < 1e-390 there)
+    so that normal incidence (``tan = 0``) stays finite in value and gradient.
+    """
+    x = projected_roughness2_tan2(v, alpha_x, alpha_y)
+    a = jnp.minimum(jax.lax.rsqrt(jnp.maximum(x, 1.0 / 900.0)), 30.0)
+    return 0.5 * (jnp.exp(-(a**2)) / (a * 1.7724538509055159) - jax.scipy.special.erfc(a))
+
+
+def beckmann_lambda_rational(v: jax.Array, alpha_x: jax.Array, alpha_y: jax.Array) -> jax.Array:
+    """Walter et al. 2007 eq. 27 rational fit of the Beckmann Lambda (error < 1e-2 in G1).
+
+    ``Lambda = (1 - 1.259 a + 0.396 a^2) / (3.535 a + 2.181 a^2)`` for ``a < 1.6``, else 0.
+    """
+    x = projected_roughness2_tan2(v, alpha_x, alpha_y)
+    a = jnp.minimum(jax.lax.rsqrt(jnp.maximum(x, 1.0 / 900.0)), 30.0)
+    lam = (1.0 - 1.259 * a + 0.396 * a**2) / (3.535 * a + 2.181 * a**2)
+    return jnp.where(a < 1.6, lam, 0.0)
+
+
+def smith_g(lambda_i: jax.Array, lambda_o: jax.Array, *, height_correlated: bool) -> jax.Array:
+    """Masking-shadowing from Smith Lambdas: ``1/((1+Li)(1+Lo))`` or ``1/(1+Li+Lo)``."""
+    if height_correlated:
+        return 1.0 / (1.0 + lambda_i + lambda_o)
+    return 1.0 / ((1.0 + lambda_i) * (1.0 + lambda_o))
+
+
+def fresnel_dielectric(cos: jax.Array, eta: jax.Array) -> jax.Array:
+    """Exact unpolarised Fresnel reflectance of a dielectric interface (Cook & Torrance 1982).
+
+    ``F = 1/2 ((g - c)/(g + c))^2 (1 + ((c (g + c) - 1)/(c (g - c) + 1))^2)`` with
+    ``c = cos`` (incidence cosine on the facet, in [0, 1]), ``g^2 = eta^2 - 1 + c^2`` and
+    ``eta`` the relative index of refraction (inside over outside). Arrays broadcast
+    elementwise. ``g - c`` is written ``(eta^2 - 1)/(g + c)`` so that it keeps its precision
+    for ``eta`` near 1. ``g^2 <= 0`` (total internal reflection, possible only for
+    ``eta < 1``) gives 1; ``g`` is sanitised first so the discarded branch stays finite.
+    """
+    g2 = eta**2 - 1.0 + cos**2
+    tir = g2 <= 0.0
+    g = jnp.sqrt(jnp.where(tir, 1.0, g2))
+    g_plus = jnp.maximum(g + cos, 1e-30)
+    g_minus = (eta**2 - 1.0) / g_plus
+    r = 0.5 * (g_minus / g_plus) ** 2 * (1.0 + ((cos * g_plus - 1.0) / (cos * g_minus + 1.0)) ** 2)
+    return jnp.where(tir, 1.0, r)
+
+
+def fresnel_conductor(cos: jax.Array, eta: jax.Array, k: jax.Array) -> jax.Array:
+    """Exact unpolarised Fresnel reflectance of a conductor with complex index ``eta + i k``.
+
+    With ``c = cos``, ``s2 = 1 - c^2`` and ``a + i b = sqrt(eta^2 - k^2 - s2 + 2 i eta k)``
+    (so ``a^2 + b^2 = sqrt((eta^2 - k^2 - s2)^2 + 4 eta^2 k^2)``):
+    ``Rs = ((a - c)^2 + b^2) / ((a + c)^2 + b^2)``,
+    ``Rp = Rs ((a c - s2)^2 + c^2 b^2) / ((a c + s2)^2 + c^2 b^2)``, ``F = (Rs + Rp) / 2``
+    (the form of pbrt and Mitsuba, written as sums of squares so that F >= 0 exactly).
+    ``a^2`` and ``b^2`` are taken each from the cancellation-free side (``a^2 b^2 =
+    eta^2 k^2``). Arrays broadcast elementwise (e.g. ``cos[:, None]`` with RGB ``eta[None]``).
+    At normal incidence ``F = ((eta - 1)^2 + k^2) / ((eta + 1)^2 + k^2)``.
+    """
+    s2 = 1.0 - cos**2
+    t0 = eta**2 - k**2 - s2
+    ek2 = (eta * k) ** 2
+    norm = jnp.sqrt(t0**2 + 4.0 * ek2)
+    pos = t0 >= 0.0
+    big = jnp.maximum(norm + jnp.abs(t0), 1e-30)  # the side without cancellation
+    a2 = jnp.where(pos, 0.5 * big, 2.0 * ek2 / big)
+    b2 = jnp.where(pos, 2.0 * ek2 / big, 0.5 * big)
+    a = jnp.sqrt(jnp.maximum(a2, 1e-30))
+    rs = ((a - cos) ** 2 + b2) / ((a + cos) ** 2 + b2)
+    cb2 = cos**2 * b2
+    rp = rs * ((a * cos - s2) ** 2 + cb2) / ((a * cos + s2) ** 2 + cb2)
+    return 0.5 * (rs + rp)
+
+
+def v_cavity_g(cos_h: jax.Array, cos_i: jax.Array, cos_o: jax.Array, cos_d: jax.Array) -> jax.Array:
+    """Torrance-Sparrow V-cavity masking-shadowing (Cook and Torrance 1982), (N,).
+
+    ``G = min(1, 2 cos_h cos_i / cos_d, 2 cos_h cos_o / cos_d)`` with ``cos_d = wi.h = wo.h``.
+    ``cos_d`` is floored at 1e-30 before the division; it is > 0 for every reflection pair
+    above the horizon, and where it is tiny the ratio is huge and the ``min`` returns 1.
+    """
+    ratio = 2.0 * cos_h * jnp.minimum(cos_i, cos_o) / jnp.maximum(cos_d, 1e-30)
+    return jnp.minimum(1.0, ratio)
+
+
+def log_cos_theta_h(h: jax.Array) -> jax.Array:
+    """``log(h.z)`` of unit half vectors ``h`` (N, 3), accurate for ``h`` near the normal.
+
+    Lobes ``cos_h^n`` with ``n`` up to 1e5 need ``log cos_h`` to relative precision where
+    ``cos_h`` rounds to 1: there it is ``log1p(-(hx^2 + hy^2)) / 2`` from the tangential
+    components; elsewhere (``hx^2 + hy^2 >= 1/2``) ``log(hz)``, with ``hz`` floored at
+    1e-30 (it is > 0 for every reflection pair above the horizon). Both branches are
+    sanitised before the ``where``, so values and gradients are finite everywhere.
+    """
+    s2 = h[:, 0] ** 2 + h[:, 1] ** 2
+    near = s2 < 0.5
+    return jnp.where(
+        near,
+        0.5 * jnp.log1p(-jnp.where(near, s2, 0.0)),
+        jnp.log(jnp.maximum(h[:, 2], 1e-30)),
+    )
