@@ -76,7 +76,7 @@ per LM answer and per posterior sample), so a swapped pair of lobes is not count
 a miss; the number of swaps is reported.
 
 Each setting's results live in one JSON file (``--out``/<setting>.json), one record per
-data set, written atomically as each data set finishes (:mod:`brdffit.util.jobs`); a killed
+data set, written atomically as each data set finishes (:mod:`benchmarks.jobs`); a killed
 run resumes where it stopped. The tables are rebuilt from those files on every run.
 
 Run: python3 benchmarks/calibration.py --quick                 # smoke test, 4 data sets
@@ -117,12 +117,12 @@ import numpy as np
 from scipy import stats
 
 import brdffit
+from benchmarks.jobs import run_jobs
 from brdffit import models
 from brdffit.engine import fit, sample
 from brdffit.errors import ChainTooShortError
 from brdffit.io.merl import merl_grid, merl_grid_measurements
-from brdffit.util.atomic import write_text
-from brdffit.util.jobs import has_key, run_jobs, write_json
+from brdffit.util.atomic import has_key, write_json, write_text
 from brdffit.util.text_table import render
 
 STRIDE = (5, 9, 9)

@@ -2,7 +2,7 @@
 
 Times the jitted ``core`` (BRDF values of 1e5 direction pairs, geometry precomputed) of
 ``disney`` with every option on, of ``disney`` with every option off (Burley diffuse + GGX)
-and of the hand-written Burley + GGX of ``tests/test_model_disney.py``, in float64 and
+and of the hand-written Burley + GGX of ``tests/models/test_disney.py``, in float64 and
 float32: the first call (trace + compile) once, then the warm call, best of 5, blocking on
 the output before the clock stops.
 
@@ -41,7 +41,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from brdffit import models  # noqa: E402
 from brdffit.core.geometry import shading_geometry, uniform_hemisphere  # noqa: E402
-from tests.test_model_disney import _OFF, minimal_reference  # noqa: E402
+from tests.models.test_disney import _OFF, minimal_reference  # noqa: E402
 
 N = 100_000
 REPEATS = int(sys.argv[1]) if len(sys.argv) > 1 else 5

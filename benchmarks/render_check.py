@@ -44,7 +44,7 @@ Run (15-90 s per material and three models, 6 min for 11 files, on the 2-core bo
 
 Latest figures: benchmarks/results/render_check.md. :func:`render_check` and
 :func:`sphere_mask` are plain functions (numpy and a Mitsuba subprocess, no brdffit), used
-by tests/test_render_check.py.
+by tests/benchmarks/test_render_check.py.
 """
 
 from __future__ import annotations

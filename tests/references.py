@@ -1,4 +1,4 @@
-"""High-precision references of every model, for ``tests/test_model_precision.py``.
+"""High-precision references of every model, for ``tests/models/test_precision.py``.
 
 ``REFERENCES`` maps a registry name to ``reference(model, params, wi, wo)``:
 
@@ -304,7 +304,7 @@ def oren_nayar_ref(model, p, g):
 @per_pair
 def lafortune_ref(model, p, g):
     """Lafortune et al. 1997 eq. 5 with the paper's own coefficients, channel by channel
-    (``paper_lafortune`` of tests/test_model_lafortune.py): ``kd/pi + sum_l [Cx ux vx +
+    (``paper_lafortune`` of tests/models/test_lafortune.py): ``kd/pi + sum_l [Cx ux vx +
     Cy uy vy + Cz uz vz]^n``, 0 where the bracket is <= 0, ``Cz = (rho (n+2)/(2 pi))^(1/n)``,
     ``Cx = cx Cz``, ``Cy = cy Cz``."""
     f = lambert(p["kd"])
@@ -325,7 +325,7 @@ def lafortune_ref(model, p, g):
 @per_pair
 def ashikhmin_shirley_ref(model, p, g):
     """Ashikhmin and Shirley 2000 eqs. 4-5 as printed (``paper_as`` of
-    tests/test_model_ashikhmin_shirley.py): exponent ``nu cos^2 phi_h + nv sin^2 phi_h``."""
+    tests/models/test_ashikhmin_shirley.py): exponent ``nu cos^2 phi_h + nv sin^2 phi_h``."""
     nu, nv = (p["nu"], p["nv"]) if model.anisotropic else (p["n"], p["n"])
     e = nu * mp.cos(g.ph) ** 2 + nv * mp.sin(g.ph) ** 2
     spec = mp.sqrt((nu + 1) * (nv + 1)) / (8 * mp.pi) * g.ch**e / (g.cd * max(g.ci, g.co))
@@ -338,7 +338,7 @@ def ashikhmin_shirley_ref(model, p, g):
 
 @per_pair
 def kurt_ref(model, p, g):
-    """Kurt et al. 2010 eqs. 3-5 (``paper_kurt`` of tests/test_model_kurt.py): Beckmann in
+    """Kurt et al. 2010 eqs. 3-5 (``paper_kurt`` of tests/models/test_kurt.py): Beckmann in
     (theta_h, phi_h), Schlick F at ``wi.h``, ``ks F D / (4 (wi.h) (cos_i cos_o)^alpha)``."""
     f = lambert(p["kd"])
     for l in range(1, model.n_lobes + 1):
@@ -385,7 +385,7 @@ def nishino_lombardi_ref(model, p, g):
 
 @per_pair
 def brady_ref(model, p, g):
-    """Model table row "2014 Brady" (``table_formula`` of tests/test_model_brady.py):
+    """Model table row "2014 Brady" (``table_formula`` of tests/models/test_brady.py):
     ``kd/pi + ks F(L.H) / (4 L.H) exp(-(tan(theta_h) / beta^2)^a)``, Schlick F."""
     x = mp.tan(g.th) / p["beta"] ** 2
     lobe = mp.exp(-(x ** p["exponent"])) if x > 0 else mp.mpf(1)
@@ -443,7 +443,7 @@ def _schlick_weight(u):
 @per_pair
 def disney_ref(model, p, g):
     """``BRDF(L, V, N, X, Y)`` of the BRDF Explorer's disney.brdf (seed 003), line by line as
-    ``shader_brdf`` of tests/test_model_disney.py, with a linear base colour (no mon2lin) and
+    ``shader_brdf`` of tests/models/test_disney.py, with a linear base colour (no mon2lin) and
     a switched-off feature's parameter at 0."""
 
     def get(name, flag=True):
@@ -532,7 +532,7 @@ def _clamp(x, lo, hi):
 def filament_ref(model, p, g):
     """Filament's surfaceShading for the standard and cloth models (brdf.fs,
     shading_model_standard.fs, shading_model_cloth.fs), as ``glsl_standard`` / ``glsl_cloth``
-    of tests/test_model_filament.py, divided by NoL (BRDF without the cosine)."""
+    of tests/models/test_filament.py, divided by NoL (BRDF without the cosine)."""
     l, v, h = g.wi, g.wo, g.h
     n_v, n_l, n_h, l_h = g.co, g.ci, g.ch, g.cd
     lo = num("0.045")
@@ -601,7 +601,7 @@ def filament_ref(model, p, g):
 
 @per_pair
 def course_cook_torrance_ref(model, p, g):
-    """Seed 002 as printed (``seed_brdf`` of tests/test_model_course_cook_torrance.py):
+    """Seed 002 as printed (``seed_brdf`` of tests/models/test_course_cook_torrance.py):
     GGX with ``alpha = roughness^2``, Schlick-GGX ``k = (roughness + 1)^2 / 8``, Schlick F at
     ``v.h``, ``k_d = 1 - F`` (times ``1 - metallic``, LearnOpenGL's workflow)."""
     r, albedo = p["roughness"], rgb(p["albedo"])

@@ -5,7 +5,7 @@ clean values without an error; scalars with huge standard errors named not ident
 losses per sample beside the sums; an unconverged fit with the lowest loss ranked by it
 in ``brdffit report``; the Pareto medians over the materials every model has;
 ``--families``; figures whose labels all lie inside the canvas. (``brdffit sample``
-saying what it does and showing each warning once: ``tests/test_cli.py``.)
+saying what it does and showing each warning once: ``tests/cli/test_cli.py``.)
 """
 
 from __future__ import annotations
@@ -17,9 +17,9 @@ import time
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from brdffit.cli.commands import main
 
 from brdffit import Measurements, Status, models, synthesize
+from brdffit.cli.commands import main
 from brdffit.core.result import FitResult, per_sample, value_text
 from brdffit.engine import fit
 from brdffit.engine import metrics as metrics_mod

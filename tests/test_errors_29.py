@@ -13,9 +13,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from brdffit.cli.commands import build_parser, main
 
 from brdffit import models, synthesize
+from brdffit.cli.commands import build_parser, main
 from brdffit.errors import BrdffitError, MissingDependencyError, ParameterError, SweepError
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -175,7 +175,7 @@ def test_garbage_npz_gets_our_message(capsys, tmp_path):
 def test_nbrdf_without_h5py_raises_missing_dependency(tmp_path, monkeypatch, capsys):
     pytest.importorskip("h5py")
     from brdffit.io.nbrdf import read_nbrdf
-    from tests.test_nbrdf import _architecture, _random_weights, _write_keras
+    from tests.io.test_nbrdf import _architecture, _random_weights, _write_keras
 
     stem = _write_keras(tmp_path / "toy", _random_weights(), _architecture())
     monkeypatch.setitem(sys.modules, "h5py", None)

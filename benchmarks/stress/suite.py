@@ -8,10 +8,10 @@ import traceback
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
+from benchmarks.jobs import run_jobs
 from brdffit import models as registry
 from brdffit.engine.metrics import get_metric
 from brdffit.util.atomic import remove_temporaries
-from brdffit.util.jobs import run_jobs
 from brdffit.util.text_table import render
 
 from .files import case_path, is_finished, write_case
@@ -65,7 +65,7 @@ def run_suite(
     """Run every unfinished case of ``models x metrics x regimes`` into folder ``out``.
 
     ``jobs`` > 1 runs the cases in that many worker processes
-    (:func:`brdffit.util.jobs.run_jobs`); each worker compiles a model once and keeps it.
+    (:func:`benchmarks.jobs.run_jobs`); each worker compiles a model once and keeps it.
     Returns the number of cases run.
     """
 

@@ -85,7 +85,7 @@ def run_demo(
     with warnings.catch_warnings(record=True):
         warnings.simplefilter("always")
         post = sample(
-            models.get(best.model, **best.options),
+            models.model_of(best),
             fit_data,
             init=best,
             noise="multiplicative",

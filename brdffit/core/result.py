@@ -29,6 +29,24 @@ SUMMED_METRICS = ("low_e1", "low_e2")
 (``log1p_l1``)."""
 
 
+#: The side, in degrees of (theta_h, theta_d), of the blocks that ``errors="blocks"``
+#: treats as independent (:func:`brdffit.engine.uncertainty.block_covariance`).
+BLOCK_DEG = 10.0
+
+
+def errors_assumed(method: str, n_blocks: int = 0) -> str:
+    """What the standard errors of ``method`` (``sandwich``, ``classic``, ``blocks``) assume,
+    in the words reports print beside them."""
+    if method == "classic":
+        return "residuals independent, one variance; errors by classic (s^2 (J^T J)^-1)"
+    if method == "blocks":
+        return (
+            f"residuals correlated within {BLOCK_DEG:g}-degree (theta_h, theta_d) blocks, "
+            f"independent between them; errors by block jackknife over {n_blocks} blocks"
+        )
+    return "residuals independent, any variance; errors by sandwich"
+
+
 def per_sample(metric: str, loss: float, n_samples: int) -> float:
     """The loss of ``metric`` per sample (module docstring): ``loss / n_samples`` for the
     summed metrics, ``loss`` itself for the normalised ones; NaN without samples."""
@@ -249,8 +267,6 @@ class FitResult:
         identified`` and ``did not move`` name only the channels they concern. The
         metric's value is given as computed (a sum, RMS or mean) and per sample.
         """
-        from brdffit.engine.uncertainty import describe  # uncertainty builds FitResults
-
         opts = ", ".join(f"{k}={v!r}" for k, v in self.options.items())
         cut = "no angle cut" if self.cut_deg is None else f"theta_i, theta_o < {self.cut_deg:g} deg"
         others = ", ".join(
@@ -263,7 +279,7 @@ class FitResult:
             f"    metric           {self.metric} = "
             f"{_loss_text(self.metric, self.loss, self.n_samples)}   ({cut})",
             f"    other metrics    {others}",
-            f"    noise model      {describe(self.errors_method, self.error_blocks)}"
+            f"    noise model      {errors_assumed(self.errors_method, self.error_blocks)}"
             + (f"; {self.robust} loss, scale {self.robust_scale:.3g}" if self.robust else ""),
             f"    status           {self.status.value}",
             f"    steps            {self.n_steps} "

@@ -13,7 +13,7 @@ between blocks, and the covariance is the cluster jackknife (CR3; MacKinnon and 
 with ``A = J^T J``, ``A_b = J_b^T J_b`` and ``s_b = J_b^T e_b`` the Gram matrix and score
 of block ``b``, leaving block ``b`` out moves the estimate by ``d_b = (A - A_b)^-1 s_b``,
 and ``cov = (G-1)/G sum_b d_b d_b^T`` over the ``G`` blocks (exact for a model linear
-in its parameters: ``tests/test_error_blocks.py`` checks it against real refits).
+in its parameters: ``tests/engine/test_block_errors.py`` checks it against real refits).
 Unlike the plain cluster sandwich (``A^-1 [sum s_b s_b^T] A^-1``, Liang and Zeger 1986,
 CR1) it does not shrink the blocks that carry most of the information (the specular
 peak, the grazing rise), whose own residuals the fit has pulled towards zero. Which
@@ -23,7 +23,7 @@ estimates agree within their stated 95%): CR1 58.5%, CR2 (half the leverage
 correction, :func:`block_covariance` with ``power=0.5``) 86.6%, CR3 100% (median
 ``|z|`` 0.28 where 0.67 would be exact). CR3 is the only one not overconfident there,
 so it is the default of ``"blocks"``; its intervals are wider than needed on these
-halves. It needs many blocks (it counts them, :func:`describe`) and none that alone
+halves. It needs many blocks (it counts them, :func:`brdffit.core.result.errors_assumed`) and none that alone
 identifies a parameter.
 
 Only k x k matrices (``J^T J`` and ``J^T diag(r^2) J``, formed on the device by
@@ -43,7 +43,7 @@ import numpy as np
 from jaxtyping import Array
 
 from brdffit.core.parameters import ParameterLayout, Params
-from brdffit.core.result import AT_BOUND_ATOL, AT_BOUND_RTOL, FitResult, Status
+from brdffit.core.result import AT_BOUND_ATOL, AT_BOUND_RTOL, BLOCK_DEG, FitResult, Status
 from brdffit.engine import objective as objective_mod
 from brdffit.engine.metrics import Metric, Prepared
 from brdffit.engine.objective import Objective
@@ -61,7 +61,6 @@ working precision (float64 resolves 1 in 4.5e15)."""
 ERRORS = ("sandwich", "classic", "blocks")
 """The kinds of standard errors :func:`brdffit.fit` reports (module docstring)."""
 
-BLOCK_DEG = 10.0
 """Side of the (theta_h, theta_d) blocks of ``errors="blocks"``, degrees. Model error is
 a smooth function of (theta_h, theta_d): the residuals of a fit to measured data change
 sign over a few degrees (specular peak, Fresnel rise), so a 10-degree block holds a
@@ -86,18 +85,6 @@ def block_index(prep: Prepared, block_deg: float = BLOCK_DEG) -> tuple[np.ndarra
     per_row = int(np.ceil(90.0 / block_deg)) + 1
     occupied, ids = np.unique(i * per_row + j, return_inverse=True)
     return ids.astype(np.int32), int(occupied.size)
-
-
-def describe(method: str, n_blocks: int = 0) -> str:
-    """What the standard errors of ``method`` assume, for reports."""
-    if method == "classic":
-        return "residuals independent, one variance; errors by classic (s^2 (J^T J)^-1)"
-    if method == "blocks":
-        return (
-            f"residuals correlated within {BLOCK_DEG:g}-degree (theta_h, theta_d) blocks, "
-            f"independent between them; errors by block jackknife over {n_blocks} blocks"
-        )
-    return "residuals independent, any variance; errors by sandwich"
 
 
 @dataclass(frozen=True)

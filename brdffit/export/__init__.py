@@ -213,7 +213,7 @@ def _prepare(result: FitResult) -> _Prepared:
     _numbers.require_finite("the fit's parameter", result.params)
     wi, wo = error_directions()
     a_wi, a_wo = albedo_directions()
-    model = models.get(result.model, **dict(result.options))
+    model = models.model_of(result)
     params = {k: np.asarray(v, float) for k, v in result.params.items()}
     both = evaluate_model(model, params, np.vstack([wi, a_wi]), np.vstack([wo, a_wo]))
     f = np.asarray(both, float)  # one compiled call for both direction sets
@@ -320,7 +320,7 @@ def write_exports(
     is written, so a refused target or value (:class:`ExportError`) leaves no file.
     Returns each export with the paths written.
     """
-    names = check_targets(models.get(result.model, **dict(result.options)), targets)
+    names = check_targets(models.model_of(result), targets)
     prep = _prepare(result)
     done = [_export(prep, t) for t in names]
     out = []

@@ -3,7 +3,7 @@
 Written from Mitsuba 3.x's sources (``src/bsdfs/{diffuse,roughconductor,principled}.cpp``,
 ``principledhelpers.h``, ``include/mitsuba/render/{microfacet,fresnel}.h``) so that an
 export's error can be measured, and its parameters fitted, without Mitsuba installed;
-``tests/test_export.py`` checks every function here against Mitsuba itself.
+``tests/export/test_export.py`` checks every function here against Mitsuba itself.
 
 Convention: brdffit's (``wi`` toward the light, ``wo`` toward the viewer, f in 1/sr
 without the cosine, (N, 3)). Mitsuba's ``si.wi`` is brdffit's ``wo`` and its ``wo`` is

@@ -23,7 +23,7 @@ The diffuse factors ``1 - (1 - cos/2)^5 ~ 5 cos/2`` cancel at grazing angles whe
 printed (relative error ~1e-16/cos: 1e-6 at cos 1e-10): they are ``-expm1(5 log1p(-cos/2))``.
 Reciprocal (``max`` and ``wi . h = wo . h`` are symmetric). Energy conserving, as the paper
 claims: checked by quadrature over ``Rs``, ``n`` and incidence with ``Rd = 1``
-(``tests/test_model_ashikhmin_shirley.py``); the largest albedo, 0.99996, is at ``Rs = 1``,
+(``tests/models/test_ashikhmin_shirley.py``); the largest albedo, 0.99996, is at ``Rs = 1``,
 ``n = 1e5``, normal incidence, where ``albedo <= int p_h dw_h = 1`` holds exactly because
 ``F = 1`` and ``cos_o / max(cos_i, cos_o) <= 1``.
 """

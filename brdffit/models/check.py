@@ -7,7 +7,7 @@ float64), :func:`check_model` evaluates ``model.eval`` on :func:`extreme_pairs`
 negative values, non-finite gradients of ``sum(f)`` over the pairs with finite values
 with respect to every parameter scalar, and non-zero values below the horizon. A value
 of ``+inf`` is an overflow, counted apart and allowed: the true value exceeds the
-dtype's range (``tests/test_model_precision.py`` holds every model to that in float64
+dtype's range (``tests/models/test_precision.py`` holds every model to that in float64
 against a higher-precision reference), and a wrong small finite number would be worse.
 ``brdffit check`` prints the rows as a table (:func:`format_table`).
 

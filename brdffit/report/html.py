@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from brdffit.core.measurements import Measurements
-from brdffit.core.result import FitResult
+from brdffit.core.result import FitResult, errors_assumed
 from brdffit.errors import MeasurementsError
 from brdffit.selection.crossrank import SweepResults
 from brdffit.util.atomic import write_text
@@ -165,7 +165,6 @@ def _parameter_rows(result: FitResult) -> list[list[str]]:
 
 
 def _fit_statistics(result: FitResult) -> list[list[str]]:
-    from brdffit.engine.uncertainty import describe
 
     opts = ", ".join(f"{k}={v!r}" for k, v in result.options.items()) or "defaults"
     cut = "none" if result.cut_deg is None else f"theta_i, theta_o < {result.cut_deg:g} deg"
@@ -176,7 +175,7 @@ def _fit_statistics(result: FitResult) -> list[list[str]]:
         [f"metric {result.metric}", _fmt(result.loss)],
         ["other metrics (same samples)", others or "none"],
         ["angle cut", cut],
-        ["noise model", describe(result.errors_method, result.error_blocks)],
+        ["noise model", errors_assumed(result.errors_method, result.error_blocks)],
         ["status", result.status.value],
         ["steps", f"{result.n_steps} (best of {result.n_starts} starts)"],
         ["samples", f"{result.n_samples} ({result.n_data} residuals), {result.n_free} free"],

@@ -16,11 +16,6 @@ from brdffit.core.measurements import Measurements
 from brdffit.core.result import FitResult
 
 
-def model_of(result: FitResult):
-    """The model a result was fitted with, rebuilt from its name and options."""
-    return models.get(result.model, **result.options)
-
-
 def plot_slices(
     data: Measurements,
     results: Sequence[FitResult],
@@ -51,7 +46,7 @@ def plot_slices(
         cos_i = data.wi[idx, 2]
         ax.semilogy(th, data.values[idx, channel] * cos_i, ".", color="k", ms=3, label="data")
         for r in results:
-            m = model_of(r)
+            m = models.model_of(r)
             f = np.asarray(
                 m.eval({k: jnp.asarray(v) for k, v in r.params.items()}, data.wi[idx], data.wo[idx])
             )

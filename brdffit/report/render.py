@@ -50,13 +50,13 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from brdffit import models
 from brdffit.core.abstract_model import AbstractModel
 from brdffit.core.geometry import MERL_SHAPE, above_horizon, io_to_halfdiff, merl_indices
 from brdffit.core.measurements import Measurements
 from brdffit.core.result import FitResult
 from brdffit.errors import MeasurementsError
 from brdffit.io.merl import merl_grid
-from brdffit.report.plots import model_of
 
 Fit = FitResult | tuple[AbstractModel, Mapping[str, object]]
 Brdf = Callable[[np.ndarray, np.ndarray], np.ndarray]
@@ -70,7 +70,7 @@ _CHUNK = 16384  # rows per jitted model evaluation
 def model_brdf(fit: Fit) -> tuple[AbstractModel, Brdf]:
     """The model of ``fit`` and ``f(wi, wo)`` -> (n, 3) numpy values in 1/sr (float64)."""
     if isinstance(fit, FitResult):
-        model, params = model_of(fit), fit.params
+        model, params = models.model_of(fit), fit.params
     else:
         model, params = fit
     p = {k: jnp.asarray(v, float) for k, v in params.items()}

@@ -211,7 +211,7 @@ def fit_models(
     """
     from brdffit.engine.fit import fit
     from brdffit.models import label
-    from brdffit.util.jobs import progress_bar, progress_line
+    from brdffit.util.progress import progress_bar, progress_line
 
     bar = progress_bar(len(models_), "rank", "fit", progress)
     out = []

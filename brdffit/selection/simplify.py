@@ -112,7 +112,6 @@ import time
 from dataclasses import dataclass
 
 import equinox as eqx
-import jax
 import jax.numpy as jnp
 import numpy as np
 from jax import lax
@@ -124,11 +123,12 @@ from brdffit.core.result import FitResult
 from brdffit.engine import lm, metrics, starts
 from brdffit.engine.fit import fit
 from brdffit.engine.objective import Objective
+from brdffit.engine.timing import eval_seconds
 from brdffit.errors import ParameterError
 from brdffit.selection.folds import MIN_GAIN, deal_blocks, feature_test, fold_t, keep_threshold
 from brdffit.selection.reduction import PathRow, Reduction
 from brdffit.selection.variants import joint_move, moves
-from brdffit.util.jobs import progress_bar, progress_line
+from brdffit.util.progress import progress_bar, progress_line
 
 __all__ = [
     "CRITERIA", "PathRow", "Reduction", "deal_blocks", "fold_t", "keep_threshold", "simplify"
@@ -255,7 +255,9 @@ def _search(s, model, data, metric, full, prep, cut_deg, seed, fit_kwargs) -> Re
         kw = {**fit_kwargs, "init": init, "screen": 0, "n_restarts": 0}
         kw["freeze"] = s.freeze_names(node.model)
         result = fit(node.model, data, metric, cut_deg=cut_deg, seed=seed, **kw)
-    ratio = _eval_time(node.model, result.params, prep) / _eval_time(model, full.params, prep)
+    ratio = eval_seconds(node.model, result.params, prep.g) / eval_seconds(
+        model, full.params, prep.g
+    )
     gain = s.min_gain if k_folds else math.nan
     return Reduction(tuple(path), chosen, result, full, ratio, s.criterion, k_folds,
                      float(s.n_se), gain, m.name, data.source)  # fmt: skip
@@ -418,25 +420,3 @@ def _solve_rows(obj: Objective, z0, prep: metrics.Prepared, train, lo, hi, tol):
         return d.z, d.reason, held, jnp.sum(r * r), metrics.loss(f, prep)
 
     return lax.map(one, (z0, train), batch_size=lm.batch_size())
-
-
-@eqx.filter_jit
-def _evaluate(model, params, g):
-    return model.evaluate(params, g)
-
-
-def _eval_time(model: AbstractModel, params: dict, prep: metrics.Prepared) -> float:
-    """Best-of-5 seconds of one jitted evaluation on ``prep``'s directions."""
-    p = {k: jnp.asarray(v) for k, v in params.items()}
-    jax.block_until_ready(_evaluate(model, p, prep.g))
-    t0 = time.perf_counter()
-    jax.block_until_ready(_evaluate(model, p, prep.g))
-    reps = max(1, int(2e-3 / max(time.perf_counter() - t0, 1e-7)))
-    best = math.inf
-    for _ in range(5):
-        t0 = time.perf_counter()
-        for _ in range(reps):
-            out = _evaluate(model, p, prep.g)
-        jax.block_until_ready(out)
-        best = min(best, (time.perf_counter() - t0) / reps)
-    return best

@@ -101,7 +101,7 @@ def run_on_dask(
     """``record(job, work(job))`` for every job, as each finishes, on Dask.
 
     Arguments:
-    - ``jobs``, ``work``, ``record``, ``crashed``: as :func:`brdffit.util.jobs.run_jobs`;
+    - ``jobs``, ``work``, ``record``, ``crashed``: as :func:`benchmarks.jobs.run_jobs` (the benchmarks' runner);
       ``work`` runs on the workers (a picklable function), ``record`` here.
     - ``scheduler``: a Dask scheduler address, or ``None`` for a LocalCluster of
       ``workers`` processes (module docstring).

@@ -50,7 +50,6 @@ from brdffit.sweep.tasks import (  # noqa: F401 (the sweep's public names, re-ex
     Task,
     _failure,
     checkout_commit,
-    eval_cost,
     file_stem,
     fit_chunk,
     fit_task,
@@ -58,8 +57,8 @@ from brdffit.sweep.tasks import (  # noqa: F401 (the sweep's public names, re-ex
     provenance,
     write_outcome,
 )
-from brdffit.util.atomic import remove_temporaries, write_text
-from brdffit.util.jobs import has_key, progress_bar
+from brdffit.util.atomic import has_key, remove_temporaries, write_text
+from brdffit.util.progress import progress_bar
 
 MANIFEST = "sweep.json"
 SETTINGS = ("stride", "cut_deg", "n_restarts", "screen", "seed", "max_steps", "eval_n")

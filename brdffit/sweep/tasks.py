@@ -14,7 +14,6 @@ import dataclasses
 import functools
 import json
 import os
-import time
 import traceback
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -22,7 +21,9 @@ from pathlib import Path
 
 import numpy as np
 
-from brdffit.util.jobs import write_json
+from brdffit.engine.timing import eval_ns_per_sample
+from brdffit.util.atomic import write_json
+from brdffit.util.version import __version__
 
 
 @dataclass(frozen=True)
@@ -98,27 +99,6 @@ def _cached_data(material: Material, stride: tuple[int, int, int]):
     return _CACHE[key]
 
 
-def eval_cost(model, params: dict, data, *, n: int = 65536, repeats: int = 3) -> float:
-    """Best-of-``repeats`` warm time of ``jax.jit(model.eval)`` on ``n`` samples, ns/sample.
-
-    The directions are the valid samples of ``data`` tiled (or cut) to ``n``.
-    """
-    import jax
-    import jax.numpy as jnp
-
-    idx = np.resize(np.flatnonzero(data.valid), n)
-    wi, wo = jnp.asarray(data.wi[idx]), jnp.asarray(data.wo[idx])
-    p = {k: jnp.asarray(v) for k, v in params.items()}
-    f = jax.jit(model.eval)
-    f(p, wi, wo).block_until_ready()
-    best = np.inf
-    for _ in range(repeats):
-        t = time.perf_counter()
-        f(p, wi, wo).block_until_ready()
-        best = min(best, time.perf_counter() - t)
-    return float(best / n * 1e9)
-
-
 def checkout_commit(package_dir: Path) -> str | None:
     """``git describe --always --dirty`` of the checkout whose top level holds
     ``package_dir`` as ``<top>/<package name>``; ``None`` when there is none (an
@@ -151,12 +131,10 @@ def provenance() -> dict:
     """
     import jax
 
-    import brdffit
-
-    here = Path(brdffit.__file__).resolve().parent
+    here = Path(__file__).resolve().parents[1]  # the brdffit package folder
     commit = checkout_commit(here) or os.environ.get("BRDFFIT_GIT_DESCRIBE") or None
     return {
-        "brdffit": getattr(brdffit, "__version__", None),
+        "brdffit": __version__,
         "git": commit,
         "jax": jax.__version__,
         "backend": jax.default_backend(),
@@ -239,7 +217,7 @@ def _outcome(task: Task, model, data, r, batch: int = 1) -> dict:
     s = task.settings
     d = json.loads(r.to_json())
     ok = bool(np.isfinite(r.loss))  # an unconverged fit is ranked by its loss: time it too
-    ns = eval_cost(model, r.params, data, n=s["eval_n"]) if ok else None
+    ns = eval_ns_per_sample(model, r.params, data, n=s["eval_n"]) if ok else None
     d.update(
         label=task.model,
         material=task.material.name,

@@ -1,4 +1,5 @@
-"""Atomic file writes: a temporary file in the target's folder, fsync, then ``os.replace``.
+"""Atomic file writes (bytes, text, JSON, figures): a temporary file in the target's folder,
+fsync, then ``os.replace``.
 
 A reader never sees a half-written file, and an interrupted write leaves the old
 file (or none) in place.
@@ -8,6 +9,7 @@ from __future__ import annotations
 
 import contextlib
 import io
+import json
 import os
 import tempfile
 from pathlib import Path
@@ -73,3 +75,19 @@ def remove_temporaries(folder: str | os.PathLike[str]) -> None:
     """Delete, below ``folder``, the temporary files a killed :func:`write_atomic` left."""
     for p in Path(folder).rglob(".*.tmp"):
         p.unlink(missing_ok=True)
+
+
+def write_json(path: str | Path, payload: dict) -> None:
+    """Write ``payload`` as indented JSON to ``path`` atomically, making its folder."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    write_text(path, json.dumps(payload, indent=1))
+
+
+def has_key(path: str | Path, key: str) -> bool:
+    """True when ``path`` is a JSON object file that parses and holds ``key``."""
+    try:
+        d = json.loads(Path(path).read_text())
+    except (OSError, ValueError):
+        return False
+    return isinstance(d, dict) and key in d

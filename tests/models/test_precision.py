@@ -53,7 +53,7 @@ errors the test exists for (Lafortune's old exponent cap: factors 0.38 to 1e-37)
 MODEL_RTOL = {"sgd": 1e-7}
 """Models with an error of their own method above :data:`RTOL`: SGD reads Smith's Lambda
 from a cubic Hermite table (``models/sgd.py``), within 2e-8 of its quadrature relative in
-each of G1(wi) and G1(wo); ``tests/test_model_sgd.py`` holds it to the same 1e-7."""
+each of G1(wi) and G1(wo); ``tests/models/test_sgd.py`` holds it to the same 1e-7."""
 ATOL = 1e-280
 """Absolute floor in 1/sr. Log-space guards floor exponents at -700 (``exp(-700) = 1e-304``,
 just above float64's smallest normal number 2.2e-308), and the value is then multiplied by
@@ -87,7 +87,7 @@ MAX_LISTED = 30
 def collect_references() -> dict[str, Callable]:
     """Registry name -> reference, from ``tests/references.py`` and ``tests/references_*.py``."""
     found = dict(references.REFERENCES)
-    for path in sorted(Path(__file__).parent.glob("references_*.py")):
+    for path in sorted(Path(__file__).parents[1].glob("references_*.py")):
         module = importlib.import_module(f"tests.{path.stem}")
         for name, fn in module.REFERENCES.items():
             if name in found:
@@ -349,9 +349,9 @@ def _check(case: Case, pairs: tuple) -> None:
 
 def _first_row_per_model() -> list:
     """The first row of each model runs in the default suite, further option rows are
-    ``slow`` (``bash benchmarks/slow_checks.sh``), as in ``tests/test_identifiability.py``:
+    ``slow`` (``bash benchmarks/slow_checks.sh``), as in ``tests/models/test_identifiability.py``:
     a 40-digit reference costs up to a minute a row (SGD's two Smith integrals)."""
-    seen, out = {"sgd"}, []  # SGD's rows (73 s): tests/test_model_sgd.py checks it against
+    seen, out = {"sgd"}, []  # SGD's rows (73 s): tests/models/test_sgd.py checks it against
     for c in ALL_CASES:  # the same 40-digit reference on the extreme pairs, in 23 s
         out.append(pytest.param(c, id=c.id, marks=() if c.model not in seen else pytest.mark.slow))
         seen.add(c.model)

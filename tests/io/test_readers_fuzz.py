@@ -199,7 +199,7 @@ def test_mutated_bsdf_header(tmp_path, edits, cut):
 @pytest.fixture(scope="module")
 def nbrdf_seed(tmp_path_factory) -> Path:
     pytest.importorskip("h5py")
-    from tests.test_nbrdf import _architecture, _random_weights, _write_keras
+    from tests.io.test_nbrdf import _architecture, _random_weights, _write_keras
 
     return _write_keras(
         tmp_path_factory.mktemp("nbrdf") / "toy", _random_weights(units=(4, 3)),

@@ -14,9 +14,10 @@ import pytest
 
 from brdffit import fit_many, models
 from brdffit.core.measurements import Measurements
+from brdffit.core.result import BLOCK_DEG
 from brdffit.engine.metrics import get_metric, keep_mask, prepare
 from brdffit.engine.objective import Objective, block_moments, natural_moments
-from brdffit.engine.uncertainty import BLOCK_DEG, block_covariance, block_index
+from brdffit.engine.uncertainty import block_covariance, block_index
 from brdffit.errors import ParameterError
 from tests.helpers import random_pairs
 

@@ -1,4 +1,4 @@
-"""Resumable jobs in worker processes, and the progress bar of every long command.
+"""Resumable jobs in worker processes, for the benchmarks (the package's sweeps run on Dask).
 
 A job's ``work`` writes its own result file atomically (:mod:`brdffit.util.atomic`) and
 returns a small status; a job whose file is finished is skipped by the caller before
@@ -10,15 +10,11 @@ persistent compilation cache on.
 from __future__ import annotations
 
 import concurrent.futures as cf
-import json
 import multiprocessing
-import sys
 from collections.abc import Callable, Sequence
-from pathlib import Path
 from typing import TypeVar
 
-from brdffit.util.atomic import write_text
-from brdffit.util.jax_config import enable_compilation_cache
+from brdffit import enable_compilation_cache
 
 J = TypeVar("J")
 R = TypeVar("R")
@@ -58,37 +54,3 @@ def run_jobs(
         except BaseException:
             pool.shutdown(wait=False, cancel_futures=True)
             raise
-
-
-def write_json(path: str | Path, payload: dict) -> None:
-    """Write ``payload`` as indented JSON to ``path`` atomically, making its folder."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    write_text(path, json.dumps(payload, indent=1))
-
-
-def has_key(path: str | Path, key: str) -> bool:
-    """True when ``path`` is a JSON object file that parses and holds ``key``."""
-    try:
-        d = json.loads(Path(path).read_text())
-    except (OSError, ValueError):
-        return False
-    return isinstance(d, dict) and key in d
-
-
-def progress_bar(total: int | None, desc: str, unit: str, enabled: bool = True):
-    """The tqdm bar of a long command on stderr (``sweep``, ``rank``, ``simplify``):
-    ``total`` steps of ``unit`` (``None``: count only); ``enabled=False`` shows nothing.
-    Write a finished step's line above it with :func:`progress_line`."""
-    from tqdm.auto import tqdm
-
-    return tqdm(
-        total=total, desc=desc, unit=unit, disable=not enabled, dynamic_ncols=True,
-        file=sys.stderr,
-    )  # fmt: skip
-
-
-def progress_line(bar, text: str) -> None:
-    """``text`` as one line on stderr above ``bar`` (nothing when the bar is disabled)."""
-    if not bar.disable:
-        bar.write(text, file=sys.stderr)

@@ -16,9 +16,9 @@ import xml.etree.ElementTree as ET
 
 import numpy as np
 import pytest
-from brdffit.cli.commands import main
 
 from brdffit import models, synthesize, write_merl
+from brdffit.cli.commands import main
 from brdffit.core.result import FitResult
 from brdffit.export import (
     EXACT_TOL,

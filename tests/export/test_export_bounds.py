@@ -6,7 +6,7 @@ export must be one its renderer parses -- Mitsuba 3 loads the dict (``load_dict`
 the written XML (``load_file``); the glTF is strict JSON with every value inside the
 glTF 2.0 schema's ranges; the MaterialX is XML -- every number in the files is finite
 and 0 or float32-normal, and the reported error is the one an independent evaluation
-measures (Mitsuba's own ``eval``, the glTF spec's BRDF written in tests/test_export.py);
+measures (Mitsuba's own ``eval``, the glTF spec's BRDF written in tests/export/test_export.py);
 an exact export matches the model pointwise. A model whose own values are not finite at
 the drawn parameters must be refused with ExportValueError before any file is written.
 
@@ -38,7 +38,7 @@ from brdffit.export import (
 )
 from brdffit.export._numbers import FLOAT32_MAX, FLOAT32_TINY
 from brdffit.models._restrict import base_of
-from tests.test_export import (
+from tests.export.test_export import (
     check_gltf_document,
     gltf_brdf,
     load_gltf,

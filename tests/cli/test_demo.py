@@ -6,11 +6,12 @@ import json
 from html.parser import HTMLParser
 
 import pytest
+
 from brdffit.cli.demo import TRUTH, run_demo
 
 # 36-43 s on 2 cores: in the slow tier (bash benchmarks/slow_checks.sh). Its parts stay
 # in the default suite: fit, sample, rank, report and export through the command line
-# (tests/test_cli.py, test_html_report.py, test_export.py).
+# (tests/cli/test_cli.py, test_html_report.py, test_export.py).
 pytestmark = pytest.mark.slow
 
 

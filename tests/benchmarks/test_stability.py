@@ -26,7 +26,7 @@ from brdffit.engine.metrics import get_metric, prepare
     [
         "baseline",
         "near_mirror",
-        # 12 s; robust fits stay in the default suite in tests/test_fit.py
+        # 12 s; robust fits stay in the default suite in tests/engine/test_fit.py
         pytest.param("outliers_huber", marks=pytest.mark.slow),
         "missing_half",
     ],
@@ -154,7 +154,7 @@ def test_table_renders_from_json(tmp_path):
 
 
 def test_the_benchmark_script_exits_2_naming_the_bad_input(tmp_path):
-    script = Path(__file__).parents[1] / "benchmarks" / "stability.py"
+    script = Path(__file__).parents[2] / "benchmarks" / "stability.py"
     empty = subprocess.run([sys.executable, script, "--out", tmp_path, "--table"],
                            capture_output=True, text=True)  # fmt: skip
     assert empty.returncode == 2

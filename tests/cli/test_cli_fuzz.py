@@ -7,11 +7,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from brdffit.cli.commands import main
 from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
 from brdffit import models, synthesize
+from brdffit.cli.commands import main
 
 FUZZ = settings(
     max_examples=60,

@@ -14,10 +14,10 @@ import math
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from brdffit.cli.commands import main
 from scipy import stats
 
 from brdffit import ParameterError, Reduction, models, synthesize
+from brdffit.cli.commands import main
 from brdffit.engine import metrics
 from brdffit.engine.uncertainty import block_cells, block_index
 from brdffit.errors import SweepError

@@ -16,16 +16,16 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from brdffit.cli.commands import main
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 from brdffit import models
+from brdffit.cli.commands import main
 from brdffit.errors import ParameterError, SweepError
 from brdffit.selection.crossrank import load_sweep, matrices
 from brdffit.sweep.run import Material, checkout_commit, file_stem, run_sweep, synthetic_materials
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 ARGS = dict(stride=(15, 15, 15), n_restarts=0, eval_n=4096)
 
 
@@ -289,7 +289,7 @@ def test_checkout_commit_reports_only_the_packages_own_checkout(tmp_path):
     assert checkout_commit(tmp_path / "brdffit") == own + "-dirty"
 
 
-@pytest.mark.slow  # 38-43 s; the engine's own worker-loss test (tests/test_cluster.py) is fast
+@pytest.mark.slow  # 38-43 s; the engine's own worker-loss test (tests/sweep/test_dask_runner.py) is fast
 def test_sweep_on_dask_survives_a_killed_worker(tmp_path):
     """A worker process killed while the sweep runs: Dask runs its task again on another
     worker and every result is written once (issue 31)."""

@@ -16,10 +16,10 @@ import json
 
 import numpy as np
 import pytest
-from brdffit.cli.commands import main
 
 import brdffit
 from brdffit import models
+from brdffit.cli.commands import main
 from brdffit.core.geometry import MERL_SHAPE
 from brdffit.errors import MeasurementFileError, MissingDependencyError, ParameterError
 from brdffit.io import rgl

@@ -9,7 +9,7 @@ the first time, 0.2 s the second), so the default suite runs two rows, :data:`FA
 Lambert (the smallest fit) and Lafortune's two lobes (the label switching this test
 allows for). Every other row is marked ``slow`` and runs with
 ``bash benchmarks/slow_checks.sh``; the default suite fits walter to its truth in
-``tests/test_fit.py``, and ``benchmarks/stress`` recovers every model from noisy data.
+``tests/engine/test_fit.py``, and ``benchmarks/stress`` recovers every model from noisy data.
 """
 
 from __future__ import annotations

@@ -6,10 +6,10 @@ import json
 
 import numpy as np
 import pytest
-from brdffit.cli.commands import main
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from brdffit.cli.commands import main
 from brdffit.errors import MeasurementFileError, ParameterError
 from brdffit.io.load import load_measurements
 from brdffit.io.spectra import XYZ_TO_SRGB, cie1931_xyz, spectrum_to_rgb, spectrum_to_xyz

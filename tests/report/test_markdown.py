@@ -7,8 +7,8 @@ import re
 import shutil
 
 import pytest
-from brdffit.cli.commands import main
 
+from brdffit.cli.commands import main
 from brdffit.report.markdown import write_report
 from tests.sweep_fixtures import TABLE, make_sweep
 
