@@ -8,7 +8,7 @@ interval holds the truth, with a Clopper-Pearson 95% interval on that fraction.
 Data (one fixed design, only the noise changes between data sets): the strided MERL
 grid ``STRIDE`` = (5, 9, 9) (18 theta_h x 10 theta_d x 20 phi_d bin centres, 3,600
 cells; 2,266 inside the 80-degree cut, x 3 channels), solid-angle weights from
-:func:`brdffit.io.merl.merl_grid`. theta_h is sampled densely near the mirror direction
+:func:`brdffit.io.merl_grid.merl_grid`. theta_h is sampled densely near the mirror direction
 (the MERL sqrt spacing), so the sharp lobes are resolved with few cells. Noise per cell
 and channel, ``eps ~ N(0, 1)``, independent:
 
@@ -34,7 +34,7 @@ for the settings and noise models of :data:`POSTERIOR_PLAN` (``--posteriors plan
 the CPU budget) or for all (``--posteriors all``).
 
 Which kinds match which data (the "matched" column of the tables), from
-``brdffit/uncertainty.py`` and the noise models in ``brdffit/sample.py``; ``r_i`` is
+``brdffit/engine/uncertainty.py`` and the noise models in ``brdffit/engine/sample.py``; ``r_i`` is
 the metric's residual, ``w_i`` its weight (solid angle for ngan, ``sin theta_i`` for
 low_e2):
 
@@ -118,10 +118,9 @@ from scipy import stats
 
 import brdffit
 from benchmarks.jobs import run_jobs
-from brdffit import models
-from brdffit.engine import fit, sample
+from brdffit import fit, models, sample
 from brdffit.errors import ChainTooShortError
-from brdffit.io.merl import merl_grid, merl_grid_measurements
+from brdffit.io.merl_grid import merl_grid, merl_grid_measurements
 from brdffit.util.atomic import has_key, write_json, write_text
 from brdffit.util.text_table import render
 

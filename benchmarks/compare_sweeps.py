@@ -19,7 +19,8 @@ import argparse
 import numpy as np
 from scipy.stats import kendalltau
 
-from brdffit.selection.crossrank import load_sweep, matrices
+from brdffit.selection.crossrank import matrices
+from brdffit.selection.sweep_results import load_sweep
 
 
 def compare(a_dir: str, b_dir: str) -> list[dict]:

@@ -20,8 +20,7 @@ import time
 import numpy as np
 
 import brdffit
-from brdffit import fit_many, models, synthesize
-from brdffit.engine import fit
+from brdffit import fit, fit_many, models, synthesize
 from brdffit.engine.metrics import get_metric
 
 

@@ -61,8 +61,7 @@ def cached(material: str) -> Path:
 
 def one_pair(model_name: str, metric: str, materials: list[str]) -> list[dict]:
     """Fit the first material cold, then every material warm, in this process; the rows."""
-    from brdffit import models
-    from brdffit.engine import fit
+    from brdffit import fit, models
 
     model = models.get(model_name)
     data = {m: pickle.loads(cached(m).read_bytes()) for m in materials}

@@ -46,8 +46,10 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from brdffit.io.merl import MERL_N_CELLS, merl_grid, read_merl, write_merl  # noqa: E402
-from brdffit.io.nbrdf import NBRDF, DenseLayer, read_nbrdf  # noqa: E402
+from brdffit.io.keras_file import DenseLayer  # noqa: E402
+from brdffit.io.merl import read_merl, write_merl  # noqa: E402
+from brdffit.io.merl_grid import MERL_N_CELLS, merl_grid  # noqa: E402
+from brdffit.io.nbrdf import NBRDF, read_nbrdf  # noqa: E402
 
 DEFAULT_NBRDF = ROOT.parent / "shared" / "data" / "merl_nbrdf" / "alum-bronze"
 

@@ -33,7 +33,7 @@ matte paints) rel RMSE <= 0.10 and every channel's ratio in [0.90, 1.10] under `
 
 Mitsuba runs in a subprocess (the variant, ``scalar_rgb`` by default, is the one whose
 ``measured`` plugin works on this machine; ``llvm_ad_rgb`` aborts there, see
-brdffit/rgl.py): a crash cannot take the benchmark down and is reported.
+brdffit/io/rgl.py): a crash cannot take the benchmark down and is reported.
 
 Run (15-90 s per material and three models, 6 min for 11 files, on the 2-core box):
 
@@ -221,12 +221,23 @@ def is_matte(name: str) -> bool:
 
 
 def _fit_and_export(path: Path, specs: Sequence[str], stride, folder: Path, metric: str):
-    import brdffit
+    import brdffit  # deferred: render_check() and sphere_mask() run without brdffit
     from brdffit import models
 
     t = time.perf_counter()
-    data = brdffit.read_rgl(path, stride=tuple(stride))
-    rows = {"read_s": time.perf_counter() - t, "masked": mask_summary(data), "fits": {}}
+    try:
+        data = brdffit.read_rgl(path, stride=tuple(stride))
+        masked = mask_summary(data)
+    except Exception as exc:  # an unreadable file: every model a failed row, the run goes on
+        why = f"{type(exc).__name__}: {exc}"
+        fits = {spec: {"error": why} for spec in specs}
+        return {
+            "read_s": time.perf_counter() - t,
+            "masked": "not read",
+            "read_error": why,
+            "fits": fits,
+        }
+    rows = {"read_s": time.perf_counter() - t, "masked": masked, "fits": {}}
     for spec in specs:
         row: dict[str, object] = {}
         try:
@@ -248,7 +259,7 @@ def _fit_and_export(path: Path, specs: Sequence[str], stride, folder: Path, metr
 
 def _png(path: Path, images: Mapping[str, Mapping[str, np.ndarray]], labels: Sequence[str]) -> None:
     """Rows: env, point; columns: measured, then each label; sRGB, 2x nearest upscaling."""
-    import matplotlib.image
+    import matplotlib.image  # deferred: heavy, figures only
 
     def srgb(x: np.ndarray, exposure: float) -> np.ndarray:
         x = np.clip(exposure * np.nan_to_num(x), 0.0, 1.0)
@@ -352,7 +363,7 @@ def main(argv: Sequence[str] | None = None) -> None:
     ap.add_argument("--append", action="store_true")
     args = ap.parse_args(argv)
 
-    import brdffit
+    import brdffit  # deferred: render_check() and sphere_mask() run without brdffit
     from brdffit.models import split_specs
 
     specs = split_specs(args.models)
@@ -364,15 +375,18 @@ def main(argv: Sequence[str] | None = None) -> None:
             t = time.perf_counter()
             r = _fit_and_export(path, specs, args.stride, Path(tmp), args.metric)
             mats = {s: f["material"] for s, f in r["fits"].items() if "material" in f}
-            try:
-                chk = render_check(path, mats, res=args.res, spp=args.spp, variant=args.variant)
-                r["noise"] = chk["noise"]
-                r["measured_mean"] = chk["measured_mean"]
-                r["render"] = {s: chk[s] for s in mats}
-                if name in args.png:
-                    _png(args.png_dir / f"{name}.png", chk["images"], list(mats))
-            except RuntimeError as exc:
-                r["render_error"] = str(exc)
+            if "read_error" in r:  # unreadable: nothing to render, its rows say why
+                r["render_error"] = f"not rendered: {r['read_error']}"
+            else:
+                try:
+                    chk = render_check(path, mats, res=args.res, spp=args.spp, variant=args.variant)
+                    r["noise"] = chk["noise"]
+                    r["measured_mean"] = chk["measured_mean"]
+                    r["render"] = {s: chk[s] for s in mats}
+                    if name in args.png:
+                        _png(args.png_dir / f"{name}.png", chk["images"], list(mats))
+                except RuntimeError as exc:
+                    r["render_error"] = str(exc)
             r["total_s"] = time.perf_counter() - t
             results[name] = r
             print(f"{name}: {r['total_s']:.0f} s", file=sys.stderr, flush=True)
@@ -380,7 +394,7 @@ def main(argv: Sequence[str] | None = None) -> None:
                 print(line, file=sys.stderr, flush=True)
     total = time.perf_counter() - t_all
 
-    import mitsuba
+    import mitsuba  # deferred: optional dependency
 
     try:
         commit = subprocess.run(

@@ -21,8 +21,7 @@ import emcee
 import numpy as np
 
 import brdffit
-from brdffit import models, synthesize
-from brdffit.engine import fit, sample
+from brdffit import fit, models, sample, synthesize
 from brdffit.engine.metrics import keep_mask
 
 TRUTH = {"kd": [0.12, 0.30, 0.55], "f0": [0.9, 0.6, 0.3], "alpha": 0.12}

@@ -35,7 +35,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from brdffit import enable_compilation_cache, models
 from brdffit.io.load import load_measurements  # noqa: E402
-from brdffit.selection import simplify  # noqa: E402
+from brdffit import simplify  # noqa: E402
 from brdffit.selection.families import family_of  # noqa: E402
 
 NBRDF = Path(__file__).resolve().parents[2] / "shared" / "data" / "merl_nbrdf"

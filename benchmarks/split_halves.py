@@ -29,9 +29,8 @@ from pathlib import Path
 import numpy as np
 
 import brdffit
-from brdffit import models
+from brdffit import fit, models
 from brdffit.core.measurements import Measurements
-from brdffit.engine import fit
 from brdffit.engine.metrics import get_metric, keep_mask, prepare
 from brdffit.engine.uncertainty import block_cells
 from brdffit.io.load import load_measurements

@@ -18,19 +18,19 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from brdffit import Measurements, Status, models, synthesize
-from brdffit.cli.commands import main
+from brdffit import Measurements, Status, fit, models, rank, synthesize
+from brdffit.cli import main
 from brdffit.core.result import FitResult, per_sample, value_text
-from brdffit.engine import fit
 from brdffit.engine import metrics as metrics_mod
 from brdffit.engine.objective import Objective, all_losses, freeze_map
 from brdffit.engine.uncertainty import Outcome, assemble, conditioning, covariance, unidentified
 from brdffit.errors import SweepError
 from brdffit.report.markdown import write_report
-from brdffit.selection import rank
-from brdffit.selection.crossrank import load_sweep, matrices, rank_matrix_figure
+from brdffit.report.selection_figures import pareto_figure, rank_matrix_figure
+from brdffit.selection.crossrank import matrices
 from brdffit.selection.families import family_of, read_families
-from brdffit.selection.pareto import error_vs_time, pareto_figure
+from brdffit.selection.pareto import error_vs_time
+from brdffit.selection.sweep_results import load_sweep
 from tests.sweep_fixtures import make_sweep
 
 
@@ -277,7 +277,7 @@ def test_family_guess_takes_the_head_noun_and_does_not_guess_from_colours(name, 
 
 
 def test_families_file_overrides_the_guess_in_report_and_sweep(tmp_path, capsys, monkeypatch):
-    import brdffit.sweep.run as sweep
+    import brdffit.sweep as sweep
 
     fams = tmp_path / "families.csv"
     fams.write_text("material,family\nsteel,coated metal\n# a comment\n\nred-plastic,plastic\n")

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from brdffit import models, synthesize
-from brdffit.cli.commands import build_parser, main
+from brdffit.cli import build_parser, main
 from brdffit.errors import BrdffitError, MissingDependencyError, ParameterError, SweepError
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -224,7 +224,7 @@ def test_report_skips_unreadable_result_files_and_lists_them(capsys, tmp_path):
 
 
 def test_sweep_folder_lock(tmp_path):
-    from brdffit.sweep.run import sweep_lock
+    from brdffit.sweep import sweep_lock
 
     with sweep_lock(tmp_path):
         with pytest.raises(SweepError, match="another sweep"):

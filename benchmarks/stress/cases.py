@@ -21,7 +21,16 @@ from .regimes import EXPONENT_RANGE, N_SAMPLES, ROLES, START_U, Regime
 # ------------------------------------------------------------------------------ truth
 
 
-FITTER_FILES = ("fit.py", "lm.py", "starts.py", "objective.py", "metrics.py", "parameters.py")
+FITTER_FILES = (
+    "engine/fit.py",
+    "engine/batch.py",
+    "engine/settings.py",
+    "engine/lm.py",
+    "engine/starts.py",
+    "engine/objective.py",
+    "engine/metrics.py",
+    "core/parameters.py",
+)
 
 
 def fitter_version() -> str:

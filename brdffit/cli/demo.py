@@ -21,9 +21,12 @@ from pathlib import Path
 from brdffit import models
 from brdffit.engine.fit import fit
 from brdffit.engine.sample import sample
-from brdffit.io.merl import merl_subgrid, read_merl, write_merl
+from brdffit.export import write_exports
+from brdffit.io.merl import read_merl, write_merl
+from brdffit.io.merl_grid import merl_subgrid
 from brdffit.io.synthetic import synthesize
-from brdffit.report.plots import plot_slices
+from brdffit.report.figures import plot_slices
+from brdffit.report.html import write_fit_html
 from brdffit.selection.rank import rank
 from brdffit.util.atomic import save_figure, write_text
 
@@ -97,10 +100,10 @@ def run_demo(
     files["posterior"] = out / "posterior.json"
     write_text(files["posterior"], json.dumps({**post.to_dict(), "truth": TRUTH}, indent=2))
 
-    import matplotlib
+    import matplotlib  # deferred: heavy, figures only
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # deferred: heavy, figures only
 
     files["corner"] = out / "corner.png"
     fig = post.corner(truths=TRUTH if best.model == "walter" else None)
@@ -110,9 +113,6 @@ def run_demo(
     fig = plot_slices(fit_data, results)
     save_figure(fig, files["slices"], dpi=90)
     plt.close(fig)
-
-    from brdffit.export import write_exports
-    from brdffit.report.html import write_fit_html
 
     files["html"] = write_fit_html(out / "report.html", best, fit_data)
     for e, paths in write_exports(best, ("mitsuba", "gltf"), out / f"material.{best.model}"):

@@ -129,7 +129,7 @@ class Measurements:
     - ``zenith_cut_deg``: the reader's zenith cut in degrees (samples beyond it were not
       evaluated: "outside the cut", not "not measured"), or ``None``.
     - ``stride``: the MERL sub-grid stride when the samples are a strided MERL grid in
-      order (:func:`brdffit.io.merl.merl_grid`), else ``None``.
+      order (:func:`brdffit.io.merl_grid.merl_grid`), else ``None``.
     """
 
     wi: np.ndarray

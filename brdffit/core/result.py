@@ -11,6 +11,7 @@ already and are their own per-sample value. Reports and JSON give both, named.
 from __future__ import annotations
 
 import enum
+import html
 import json
 import math
 from dataclasses import dataclass, field
@@ -338,8 +339,6 @@ class FitResult:
         ]
 
     def _repr_html_(self) -> str:
-        import html
-
         return f"<pre>{html.escape(self.report())}</pre>"
 
 

@@ -89,8 +89,9 @@ them three times the steps (the value Li et al. 2018 recommend for Hyperband).""
 class LeastSquares(Protocol):
     """What the solver needs of a problem ``C(z) = 0.5 sum rho(r(z)^2)`` on data ``prep``.
 
-    :class:`brdffit.engine.objective.Objective` (``prep`` a :class:`brdffit.engine.metrics.Prepared`)
-    is the one the package solves; tests also give it textbook residual functions.
+    :class:`brdffit.engine.objective.Objective` (``prep`` a
+    :class:`brdffit.engine.metrics.Prepared`) is the one the package solves; tests also give
+    it textbook residual functions.
     """
 
     def cost(self, z: Array, prep: Any) -> Array:

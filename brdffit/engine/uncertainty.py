@@ -23,8 +23,8 @@ estimates agree within their stated 95%): CR1 58.5%, CR2 (half the leverage
 correction, :func:`block_covariance` with ``power=0.5``) 86.6%, CR3 100% (median
 ``|z|`` 0.28 where 0.67 would be exact). CR3 is the only one not overconfident there,
 so it is the default of ``"blocks"``; its intervals are wider than needed on these
-halves. It needs many blocks (it counts them, :func:`brdffit.core.result.errors_assumed`) and none that alone
-identifies a parameter.
+halves. It needs many blocks (it counts them, :func:`brdffit.core.result.errors_assumed`)
+and none that alone identifies a parameter.
 
 Only k x k matrices (``J^T J`` and ``J^T diag(r^2) J``, formed on the device by
 :meth:`brdffit.engine.objective.Objective.natural_moments`; for ``"blocks"``, ``J^T J`` and

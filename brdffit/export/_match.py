@@ -18,7 +18,8 @@ Every export is judged the same way, by measurement:
 
 A :class:`Family` is a renderer's parametrised material: named slots with bounds and a
 numpy evaluation in brdffit's convention (``wi`` toward the light, ``wo`` toward the
-viewer, f in 1/sr without the cosine).
+viewer, f in 1/sr without the cosine). :func:`generic_alpha` is the microfacet alpha
+every target starts a model without a closed-form mapping from.
 """
 
 from __future__ import annotations
@@ -296,3 +297,18 @@ def best(matches: list[Match]) -> Match:
     principled, rendered with env rel RMSE 0.188 against the measurement, the one
     with the least score 0.131)."""
     return min(matches, key=lambda m: m.score)
+
+
+def first_of(p: Mapping[str, np.ndarray], names: tuple[str, ...], default: object) -> object:
+    """The value in ``p`` of the first of ``names`` it holds, else ``default``."""
+    return next((p[n] for n in names if n in p), default)
+
+
+def generic_alpha(p: Mapping[str, np.ndarray]) -> float:
+    """A microfacet alpha to start from: the model's own ``alpha`` or ``m``, else the
+    Beckmann-equivalent ``sqrt(2 / (n + 2))`` of a Phong-type exponent ``n``, else 0.2."""
+    found = first_of(p, ("alpha", "alpha_1", "m", "m_1", "sigma"), None)
+    if found is not None:
+        return float(np.mean(found))
+    n = first_of(p, ("n", "n_1"), None)
+    return float(np.sqrt(2.0 / (float(n) + 2.0))) if n is not None else 0.2

@@ -24,6 +24,7 @@ Lambert; those materials are fitted by least squares.
 
 from __future__ import annotations
 
+import json
 from collections.abc import Mapping
 
 import numpy as np
@@ -31,8 +32,7 @@ import numpy as np
 from brdffit.core.abstract_model import AbstractModel
 from brdffit.core.result import FitResult
 from brdffit.export import gltf_brdf
-from brdffit.export._match import Family, Match, Slot
-from brdffit.export.mitsuba import generic_alpha
+from brdffit.export._match import Family, Match, Slot, generic_alpha
 from brdffit.models import label
 from brdffit.util.version import __version__
 
@@ -237,8 +237,6 @@ def written(doc: Mapping[str, object]) -> str:
 
 def finish(result: FitResult, model: AbstractModel, m: Match) -> tuple[dict, dict, list[str]]:
     """The glTF document, its file and the notes of a chosen match."""
-    import json
-
     mat = m.family.build(m.params)
     name = label(result.model, result.options)
     kind = "exact" if m.exact else "approximate"

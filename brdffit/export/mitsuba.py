@@ -1,6 +1,7 @@
 """Export to Mitsuba 3: a BSDF dict for ``mi.load_dict`` and the same BSDF as XML.
 
-Targets (``mitsuba_bsdf`` evaluates each in numpy; the test checks it against Mitsuba):
+Targets (``mitsuba_families`` defines each as a family to fit, ``mitsuba_bsdf`` evaluates
+each in numpy; the test checks it against Mitsuba):
 
 * ``diffuse`` -- Lambert; ``lambert`` maps to it exactly.
 * ``principled`` with ``metallic = 1`` (Schlick Fresnel of ``base_color``, GGX, separable
@@ -32,8 +33,9 @@ Targets (``mitsuba_bsdf`` evaluates each in numpy; the test checks it against Mi
   (``spec_tint``, ``metallic``), so a lobe coloured unlike the body shifts the body's
   colour: on that fit the directional albedo at normal view is (+13%, -9%, -8%) per
   channel against the model's (the blend's was -24%, -21%, -24%).
-* ``blendbsdf(principled, roughconductor[distribution=ggx])`` (:func:`layered_family`),
-  tried where ``max(kd) + ks > 1``: the conductor carries the lobe's colour. On the
+* ``blendbsdf(principled, roughconductor[distribution=ggx])``
+  (:func:`~brdffit.export.mitsuba_families.layered_family`), tried where
+  ``max(kd) + ks > 1``: the conductor carries the lobe's colour. On the
   satin fit its errors are 0.067 / 0.023 against principled's 0.0098 / 0.014, but its
   albedo error is 0.022 against 0.106, and it is kept (candidates are ranked by log
   error plus albedo error, ``_match.best``): rendered against Mitsuba's ``measured``
@@ -57,190 +59,36 @@ Mitsuba's BSDFs are one-sided, like brdffit's models (black below the horizon).
 
 from __future__ import annotations
 
+import json
 from collections.abc import Mapping
 
 import numpy as np
 
 from brdffit.core.abstract_model import AbstractModel
 from brdffit.core.result import FitResult
-from brdffit.export import mitsuba_bsdf as mb
-from brdffit.export._match import Family, Match, Slot
+from brdffit.export._match import Family, Match, first_of, generic_alpha
+from brdffit.export.mitsuba_families import (
+    PRINCIPLED_FEATURES,
+    conductor_family,
+    diffuse_family,
+    gulbrandsen,
+    layered_family,
+    principled_family,
+)
 from brdffit.export.mitsuba_xml import to_xml
+from brdffit.models import label
 
 Start = tuple[Family, dict[str, object]]
 
 
-def _rgb(v: object) -> dict:
-    return {"type": "rgb", "value": [float(x) for x in np.broadcast_to(v, (3,))]}
-
-
-def _blend(p: Mapping[str, object], lobe: dict) -> dict:
-    if "weight" not in p or float(p["weight"]) >= 1.0:
-        return lobe
-    return {
-        "type": "blendbsdf",
-        "weight": float(p["weight"]),
-        "bsdf_0": {"type": "diffuse", "reflectance": _rgb(p["reflectance"])},
-        "bsdf_1": lobe,
-    }
-
-
-def _with_diffuse(p: Mapping[str, object], lobe: np.ndarray, wi: np.ndarray) -> np.ndarray:
-    if "weight" not in p:
-        return lobe
-    w = float(p["weight"])
-    return (1.0 - w) * mb.diffuse(p["reflectance"], wi, wi) + w * lobe
-
-
-def _diffuse_slots(on: bool) -> tuple[Slot, ...]:
-    return (Slot("weight", 1, 0.0, 1.0), Slot("reflectance", 3, 0.0, 1.0)) if on else ()
-
-
-def _alpha_slots(aniso: bool, lo: float = 1e-4) -> tuple[Slot, ...]:
-    if aniso:
-        return (Slot("alpha_u", 1, lo, 2.0), Slot("alpha_v", 1, lo, 2.0))
-    return (Slot("alpha", 1, lo, 2.0),)
-
-
-def diffuse_family() -> Family:
-    """``diffuse`` with RGB ``reflectance``."""
-
-    def build(p: Mapping[str, object]) -> dict:
-        return {"type": "diffuse", "reflectance": _rgb(p["reflectance"])}
-
-    return Family(
-        "diffuse",
-        (Slot("reflectance", 3, 0.0, 1.0),),
-        lambda p, wi, wo: mb.diffuse(p["reflectance"], wi, wo),
-        build,
-    )
-
-
-def conductor_family(kind: str, aniso: bool, with_diffuse: bool) -> Family:
-    """``roughconductor`` (``kind`` ggx or beckmann), optionally blended with a diffuse."""
-
-    def alphas(p: Mapping[str, object]) -> tuple[float, float]:
-        return (p["alpha_u"], p["alpha_v"]) if aniso else (p["alpha"], p["alpha"])
-
-    def evaluate(p: Mapping[str, object], wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
-        ax, ay = alphas(p)
-        lobe = mb.roughconductor(kind, ax, ay, p["eta"], p["k"], p["specular"], wi, wo)
-        return _with_diffuse(p, lobe, wi)
-
-    def build(p: Mapping[str, object]) -> dict:
-        ax, ay = alphas(p)
-        rough = {"alpha_u": float(ax), "alpha_v": float(ay)} if aniso else {"alpha": float(ax)}
-        lobe = {"type": "roughconductor", "distribution": kind, **rough}
-        lobe |= {"eta": _rgb(p["eta"]), "k": _rgb(p["k"])}
-        lobe["specular_reflectance"] = _rgb(p["specular"])
-        return _blend(p, lobe)
-
-    slots = _diffuse_slots(with_diffuse) + _alpha_slots(aniso)
-    slots += (Slot("eta", 3, 0.0, 10.0), Slot("k", 3, 0.0, 20.0), Slot("specular", 3, 0.0, 1.0))
-    name = f"roughconductor[distribution={kind}]"
-    return Family(f"blendbsdf(diffuse, {name})" if with_diffuse else name, slots, evaluate, build)
-
-
-PRINCIPLED_FEATURES = (
-    "metallic",
-    "anisotropic",
-    "spec_tint",
-    "sheen",
-    "sheen_tint",
-    "flatness",
-    "clearcoat",
-    "clearcoat_gloss",
-)
-
-
-def principled_family(features: tuple[str, ...], with_diffuse: bool = False) -> Family:
-    """``principled`` with ``base_color``, ``roughness``, ``specular`` and ``features``.
-
-    ``features`` is a subset of :data:`PRINCIPLED_FEATURES`; the others stay 0 (off).
-    ``with_diffuse``: blended with a ``diffuse`` (used with ``metallic`` fixed at 1).
-    """
-    metal = with_diffuse
-
-    def values(p: Mapping[str, object]) -> dict[str, object]:
-        q = {k: p[k] for k in ("base_color", "roughness", "specular", *features) if k in p}
-        return q | {"metallic": 1.0} if metal else q
-
-    def evaluate(p: Mapping[str, object], wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
-        return _with_diffuse(p, mb.principled(values(p), wi, wo), wi)
-
-    def build(p: Mapping[str, object]) -> dict:
-        q = {k: _rgb(v) if k == "base_color" else float(v) for k, v in values(p).items()}
-        return _blend(p, {"type": "principled", **q})
-
-    slots = _diffuse_slots(with_diffuse) + (
-        Slot("base_color", 3, 0.0, 1.0),
-        Slot("roughness", 1, 0.0, 1.0),
-    )
-    slots += () if metal else (Slot("specular", 1, 1e-3, 1.0),)
-    slots += tuple(Slot(f, 1, 0.0, 1.0) for f in features)
-    name = "blendbsdf(diffuse, principled[metallic=1])" if metal else "principled"
-    return Family(name, slots, evaluate, build)
-
-
-def layered_family() -> Family:
-    """``blendbsdf(principled, roughconductor[distribution=ggx])``: body and lobe colours apart.
-
-    ``(1 - w) principled(base_color, roughness, specular) + w roughconductor``, the
-    conductor with ``alpha = roughness^2`` and Gulbrandsen's index of an RGB ``f0``
-    (white edge tint). ``principled`` alone ties its lobe's colour to ``base_color``
-    (``spec_tint``, ``metallic``); here the white dielectric lobe keeps the Fresnel rise to
-    grazing and the conductor carries the lobe's colour, while the body is not darkened
-    by more than ``1 - w``.
-    """
-
-    def parts(p: Mapping[str, object]) -> tuple[dict[str, object], float]:
-        body = {"base_color": p["base_color"], "roughness": p["roughness"]}
-        return body | {"specular": p["specular"]}, max(float(p["roughness"]) ** 2, 1e-4)
-
-    def evaluate(p: Mapping[str, object], wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
-        body, a = parts(p)
-        eta, k = gulbrandsen(p["f0"])
-        w = float(p["weight"])
-        lobe = mb.roughconductor("ggx", a, a, eta, k, np.ones(3), wi, wo)
-        return (1.0 - w) * mb.principled(body, wi, wo) + w * lobe
-
-    def build(p: Mapping[str, object]) -> dict:
-        body, a = parts(p)
-        eta, k = gulbrandsen(p["f0"])
-        first = {"type": "principled", "base_color": _rgb(body["base_color"])}
-        first |= {"roughness": float(body["roughness"]), "specular": float(body["specular"])}
-        lobe = {"type": "roughconductor", "distribution": "ggx", "alpha": a}
-        lobe |= {"eta": _rgb(eta), "k": _rgb(k)}
-        return {"type": "blendbsdf", "weight": float(p["weight"]), "bsdf_0": first, "bsdf_1": lobe}
-
-    slots = (
-        Slot("weight", 1, 0.0, 1.0),
-        Slot("base_color", 3, 0.0, 1.0),
-        Slot("roughness", 1, 0.01, 1.0),
-        Slot("specular", 1, 1e-3, 1.0),
-        Slot("f0", 3, 0.0, 1.0),
-    )
-    name = "blendbsdf(principled, roughconductor[distribution=ggx])"
-    return Family(name, slots, evaluate, build)
-
-
 def _layered_start(alpha: float, kd: np.ndarray, f0: np.ndarray) -> Start:
-    """Start of :func:`layered_family` for ``kd / pi + lobe`` of RGB normal reflectance
-    ``f0`` (ks included): ``w = 1 - max(kd)`` (the body just fits), the rest fitted."""
+    """Start of :func:`~brdffit.export.mitsuba_families.layered_family` for ``kd / pi +
+    lobe`` of RGB normal reflectance ``f0`` (ks included): ``w = 1 - max(kd)`` (the body
+    just fits), the rest fitted."""
     w = float(np.clip(1.0 - np.max(kd), 0.05, 0.95))
     start = {"weight": w, "base_color": np.clip(kd / (1.0 - w), 0.0, 1.0)}
     start |= {"roughness": float(np.sqrt(alpha)), "specular": 0.5}
     return layered_family(), start | {"f0": np.clip(np.asarray(f0) / w, 0.0, 1.0)}
-
-
-def gulbrandsen(f0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Conductor index ``(eta, k)`` with normal reflectance ``f0`` and white edge tint.
-
-    Gulbrandsen 2014 (JCGT 3(4)) with ``g = 1``: ``eta = (1 - f0)/(1 + f0)``,
-    ``k = 2 sqrt(f0)/(1 + f0)``; ``f0 = 1`` gives Mitsuba's perfect mirror (0, 1).
-    """
-    r = np.clip(np.asarray(f0, float), 0.0, 1.0)
-    return (1.0 - r) / (1.0 + r), 2.0 * np.sqrt(r) / (1.0 + r)
 
 
 def _split(kd: np.ndarray | None, ks: np.ndarray) -> dict[str, object]:
@@ -381,20 +229,6 @@ def _course(model: AbstractModel, p: Mapping[str, np.ndarray]) -> list[Start]:
     ]
 
 
-def _first(p: Mapping[str, np.ndarray], names: tuple[str, ...], default: object) -> object:
-    return next((p[n] for n in names if n in p), default)
-
-
-def generic_alpha(p: Mapping[str, np.ndarray]) -> float:
-    """A microfacet alpha to start from: the model's own ``alpha`` or ``m``, else the
-    Beckmann-equivalent ``sqrt(2 / (n + 2))`` of a Phong-type exponent ``n``, else 0.2."""
-    found = _first(p, ("alpha", "alpha_1", "m", "m_1", "sigma"), None)
-    if found is not None:
-        return float(np.mean(found))
-    n = _first(p, ("n", "n_1"), None)
-    return float(np.sqrt(2.0 / (float(n) + 2.0))) if n is not None else 0.2
-
-
 def _ward(model: AbstractModel, p: Mapping[str, np.ndarray]) -> list[Start]:
     ax, ay = _alphas(p, "alpha")
     out = [_conductor_start("beckmann", ax, ay, p.get("kd"), p["ks"], np.ones(3))]
@@ -404,7 +238,7 @@ def _ward(model: AbstractModel, p: Mapping[str, np.ndarray]) -> list[Start]:
 
 
 def _generic(model: AbstractModel, p: Mapping[str, np.ndarray]) -> list[Start]:
-    kd = np.asarray(_first(p, ("kd", "rd", "rho", "albedo", "base_color"), np.full(3, 0.5)))
+    kd = np.asarray(first_of(p, ("kd", "rd", "rho", "albedo", "base_color"), np.full(3, 0.5)))
     alpha = float(np.clip(np.mean(generic_alpha(p)), 1e-3, 1.0))
     out = [(diffuse_family(), {"reflectance": kd})]
     ks = np.full(3, 0.5)
@@ -467,10 +301,6 @@ def written(bsdf: Mapping[str, object]) -> str:
 
 def finish(result: FitResult, model: AbstractModel, m: Match) -> tuple[dict, dict, list[str]]:
     """The Mitsuba dict, its XML and JSON files and the notes of a chosen match."""
-    import json
-
-    from brdffit.models import label
-
     bsdf = m.family.build(m.params)
     name = label(result.model, result.options)
     kind = "exact" if m.exact else "approximate"

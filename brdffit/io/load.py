@@ -15,7 +15,11 @@ from pathlib import Path
 
 from brdffit.core.measurements import Measurements
 from brdffit.errors import MeasurementFileError, ParameterError
-from brdffit.io.merl import merl_subgrid, read_merl
+from brdffit.io.merl import read_merl
+from brdffit.io.merl_grid import merl_subgrid
+from brdffit.io.nbrdf import read_nbrdf
+from brdffit.io.rgl import read_rgl
+from brdffit.io.table import read_table
 
 
 def load_measurements(
@@ -31,8 +35,6 @@ def load_measurements(
     p = Path(path)
     suffix = p.suffix.lower()
     if suffix in (".csv", ".npz"):
-        from brdffit.io.table import read_table
-
         if stride not in (1, (1, 1, 1)):
             raise ParameterError(
                 f"stride {stride} for {p}: a table of samples is read as it is; "
@@ -40,12 +42,8 @@ def load_measurements(
             )
         return read_table(p)
     if suffix == ".bsdf":
-        from brdffit.io.rgl import read_rgl
-
         return read_rgl(p, stride=stride)
     if p.suffix in (".json", ".h5"):
-        from brdffit.io.nbrdf import read_nbrdf
-
         return read_nbrdf(p).to_measurements(stride=stride)
     if not p.exists():
         raise MeasurementFileError(p, "file not found")

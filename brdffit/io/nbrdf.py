@@ -2,10 +2,9 @@
 
 Sztrajman, Rainer, Ritschel, Weyrich, "Neural BRDF Representation and Importance
 Sampling", Computer Graphics Forum 40(6), 2021. Each material is a Keras ``Sequential``
-model: ``<name>.json`` (architecture) and ``<name>.h5`` (weights, Keras 2 ``save_weights``
-layout). The published MERL reconstructions are a 6-21-21-3 MLP, Dense relu, Dense relu,
-Dense linear, then a Lambda layer ``K.exp(x) - 1``. The layer list is read from the JSON
-(units, activation, use_bias), not assumed; the weights are checked against it.
+model: ``<name>.json`` (architecture) and ``<name>.h5`` (weights), read by
+:mod:`brdffit.io.keras_file`: the layer list is read from the JSON, not assumed; the
+weights are checked against it.
 
 Input per sample: ``(hx, hy, hz, dx, dy, dz)``, the half vector with ``phi_h = 0``,
 ``(sin th, 0, cos th)``, and the difference vector ``(sin td cos pd, sin td sin pd, cos td)``
@@ -24,70 +23,23 @@ two busy cores measured faster than both large blocks and a jitted JAX version (
 
 from __future__ import annotations
 
-import base64
-import json
 import os
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 from jaxtyping import ArrayLike, Float
 
 from brdffit.core.geometry import io_to_halfdiff
 from brdffit.core.measurements import Measurements
-from brdffit.errors import MeasurementFileError, MissingDependencyError, ParameterError
-from brdffit.io.merl import MerlGrid, merl_grid, merl_grid_measurements, write_merl
+from brdffit.errors import ParameterError
+from brdffit.io.keras_file import ACTIVATIONS, N_OUTPUTS, OUTPUTS, DenseLayer, read_keras_layers
+from brdffit.io.merl import write_merl
+from brdffit.io.merl_grid import MerlGrid, merl_grid, merl_grid_measurements
 
 CHUNK: int = 2048
 """Rows per block in :meth:`NBRDF.forward` (keeps OpenBLAS on one thread per product)."""
-
-N_INPUTS: int = 6
-N_OUTPUTS: int = 3
-
-
-def _relu(x: np.ndarray) -> np.ndarray:
-    return np.maximum(x, 0.0, out=x)
-
-
-def _sigmoid(x: np.ndarray) -> np.ndarray:
-    return 0.5 * (1.0 + np.tanh(0.5 * x))
-
-
-_ACTIVATIONS: dict[str, Callable[[np.ndarray], np.ndarray]] = {
-    "linear": lambda x: x,
-    "relu": _relu,
-    "tanh": np.tanh,
-    "sigmoid": _sigmoid,
-    "softplus": lambda x: np.logaddexp(0.0, x),
-}
-
-# The Lambda layer is marshalled Python 3 bytecode. It is never executed: we recognise
-# ``lambda x_: K.exp(x_) - 1`` by its instructions LOAD_GLOBAL K, LOAD_METHOD exp,
-# LOAD_FAST x_, CALL_METHOD 1, LOAD_CONST 1, BINARY_SUBTRACT, RETURN_VALUE, the name
-# ``exp`` and the constant int 1.
-_EXPM1_BYTECODE = b"t\x00\xa0\x01|\x00\xa1\x01d\x01\x18\x00S\x00"
-_EXPM1_MARKERS = (_EXPM1_BYTECODE, b"\xda\x03exp", b"\xe9\x01\x00\x00\x00")
-_OUTPUTS: dict[str, Callable[[np.ndarray], np.ndarray]] = {
-    "linear": lambda x: x,
-    "exp(x) - 1": np.expm1,
-}
-
-
-@dataclass(frozen=True, eq=False)
-class DenseLayer:
-    """One Keras ``Dense`` layer: ``activation(x @ kernel + bias)``.
-
-    Fields: ``name`` (Keras layer name), ``kernel`` (n_in, n_out) and ``bias`` (n_out,)
-    as stored (float32, read-only; bias zero when the layer has none), ``activation``
-    (a key of the supported activations: linear, relu, tanh, sigmoid, softplus).
-    """
-
-    name: str
-    kernel: Float[np.ndarray, "n_in n_out"]
-    bias: Float[np.ndarray, " n_out"]
-    activation: str
 
 
 @dataclass(frozen=True, eq=False)
@@ -114,7 +66,7 @@ class NBRDF:
         """
         x = np.asarray(inputs, dtype=np.float64)
         prepared = self._prepared()
-        out_fn = _OUTPUTS[self.output]
+        out_fn = OUTPUTS[self.output]
         out = np.empty((x.shape[0], N_OUTPUTS))
         for start in range(0, x.shape[0], CHUNK):
             out[start : start + CHUNK] = out_fn(_apply(x[start : start + CHUNK], prepared))
@@ -126,7 +78,7 @@ class NBRDF:
             (
                 lay.kernel.astype(np.float64),
                 lay.bias.astype(np.float64),
-                _ACTIVATIONS[lay.activation],
+                ACTIVATIONS[lay.activation],
             )
             for lay in self.layers
         ]
@@ -146,7 +98,7 @@ class NBRDF:
         sd = np.sin(td)
         bb = (sd * np.cos(pd))[:, None] * k[3] + (sd * np.sin(pd))[:, None] * k[4]
         bb += np.cos(td)[:, None] * k[5]
-        out_fn = _OUTPUTS[self.output]
+        out_fn = OUTPUTS[self.output]
         out = np.empty((g.n, N_OUTPUTS))
         m = bb.shape[0]
         for i in range(a.shape[0]):
@@ -228,7 +180,7 @@ class NBRDF:
         - ``grid``: ``"merl"`` for the MERL bin centres (``grid=MERL_SHAPE`` with the
           default stride; cells below the horizon invalid), or ``(wi, wo)``, two (n, 3)
           arrays (solid-angle weights then default to equal weights).
-        - ``stride``: a coarser MERL sub-grid, as in :func:`brdffit.io.merl.merl_grid`.
+        - ``stride``: a coarser MERL sub-grid, as in :func:`brdffit.io.merl_grid.merl_grid`.
 
         Returns: :class:`Measurements` in 1/sr with ``channel_scales`` 1 and
         ``source = "NBRDF <name> (<json path>)"``.
@@ -275,9 +227,7 @@ def read_nbrdf(path: str | os.PathLike[str]) -> NBRDF:
     stem = p.with_suffix("") if p.suffix in (".json", ".h5") else p
     json_path = stem.with_name(stem.name + ".json")
     h5_path = stem.with_name(stem.name + ".h5")
-    layer_specs, output = _parse_architecture(json_path)
-    weights = _read_weights(h5_path, [s["name"] for s in layer_specs])
-    layers = _build_layers(h5_path, layer_specs, weights)
+    layers, output = read_keras_layers(json_path, h5_path)
     return NBRDF(name=stem.name, source=str(json_path), layers=layers, output=output)
 
 
@@ -288,7 +238,7 @@ def read_nbrdf_measurements(
 
     The reader of the format (README, Input files): ``read_nbrdf(path)`` then
     :meth:`NBRDF.to_measurements`; ``path`` and errors as :func:`read_nbrdf`, ``stride``
-    as :func:`brdffit.io.merl.merl_grid`.
+    as :func:`brdffit.io.merl_grid.merl_grid`.
     """
     return read_nbrdf(path).to_measurements(stride=stride)
 
@@ -306,152 +256,3 @@ def nbrdf_to_merl(path: str | os.PathLike[str], out_path: str | os.PathLike[str]
     data = read_nbrdf(path).to_measurements("merl")
     write_merl(out_path, data)
     return data
-
-
-def _parse_architecture(json_path: Path) -> tuple[list[dict[str, Any]], str]:
-    """Dense layer specs (name, units, activation, use_bias, n_in) and the output transform."""
-    try:
-        spec = json.loads(json_path.read_text())
-    except FileNotFoundError:
-        raise MeasurementFileError(json_path, "no such file (NBRDF architecture)") from None
-    except (OSError, UnicodeDecodeError) as e:
-        raise MeasurementFileError(json_path, f"cannot be read: {e}") from None
-    except json.JSONDecodeError as e:
-        raise MeasurementFileError(json_path, f"not valid JSON: {e}") from None
-    config = spec.get("config") if isinstance(spec, dict) else None
-    raw_layers = config.get("layers") if isinstance(config, dict) else config
-    if not isinstance(raw_layers, list) or not raw_layers:
-        raise MeasurementFileError(
-            json_path, "no layer list found; expected a Keras Sequential model JSON"
-        )
-    dense: list[dict[str, Any]] = []
-    output = "linear"
-    for i, layer in enumerate(raw_layers):
-        kind = layer.get("class_name") if isinstance(layer, dict) else None
-        cfg = layer.get("config", {}) if isinstance(layer, dict) else {}
-        if not isinstance(cfg, dict):
-            raise MeasurementFileError(json_path, f"layer {i} has a config that is not an object")
-        if kind == "Dense" and output == "linear":
-            dense.append(_dense_spec(json_path, i, cfg))
-        elif kind == "Lambda" and i == len(raw_layers) - 1 and output == "linear":
-            output = _lambda_output(json_path, cfg)
-        else:
-            raise MeasurementFileError(
-                json_path,
-                f"layer {i} ({kind}) is not supported; accepted: Dense layers, then at most "
-                "one final Lambda layer exp(x) - 1",
-            )
-    if not dense:
-        raise MeasurementFileError(json_path, "no Dense layer")
-    return dense, output
-
-
-def _dense_spec(json_path: Path, i: int, cfg: dict[str, Any]) -> dict[str, Any]:
-    activation = cfg.get("activation", "linear")
-    if not isinstance(activation, str) or activation not in _ACTIVATIONS:
-        raise MeasurementFileError(
-            json_path,
-            f"layer {i} has activation {activation!r}; accepted: {sorted(_ACTIVATIONS)}",
-        )
-    units = cfg.get("units")
-    if not isinstance(units, int) or units < 1:
-        raise MeasurementFileError(
-            json_path, f"layer {i} has units={units!r}; expected an int >= 1"
-        )
-    shape = cfg.get("batch_input_shape")
-    n_in = shape[-1] if isinstance(shape, list) and shape else None
-    if n_in is not None and (not isinstance(n_in, int) or isinstance(n_in, bool)):
-        raise MeasurementFileError(
-            json_path, f"layer {i} has batch_input_shape {shape!r}; expected [null, 6]"
-        )
-    return {
-        "name": str(cfg.get("name", f"dense_{i + 1}")),
-        "units": units,
-        "activation": activation,
-        "use_bias": bool(cfg.get("use_bias", True)),
-        "n_in": n_in,
-    }
-
-
-def _lambda_output(json_path: Path, cfg: dict[str, Any]) -> str:
-    function = cfg.get("function")
-    code = function[0] if isinstance(function, list) and function else function
-    try:
-        payload = base64.b64decode(code) if isinstance(code, str) else b""
-    except ValueError:
-        payload = b""
-    if cfg.get("function_type") != "lambda" or not all(m in payload for m in _EXPM1_MARKERS):
-        raise MeasurementFileError(
-            json_path,
-            f"Lambda layer {cfg.get('name')!r} is not the exp(x) - 1 of Sztrajman et al. "
-            "2021; other Python code is not evaluated",
-        )
-    return "exp(x) - 1"
-
-
-def _read_weights(h5_path: Path, names: list[str]) -> dict[str, dict[str, np.ndarray]]:
-    """``{layer: {"kernel": array, "bias": array}}`` from a Keras 2 weights file."""
-    try:
-        import h5py
-    except ImportError:
-        raise MissingDependencyError(
-            f"{h5_path}: reading NBRDF weights needs h5py; install it with: "
-            "pip install brdffit[nbrdf]"
-        ) from None
-    if not h5_path.is_file():
-        raise MeasurementFileError(h5_path, "no such file (NBRDF weights)")
-    try:
-        with h5py.File(h5_path, "r") as f:
-            root = f["model_weights"] if "model_weights" in f else f
-            return {name: _layer_weights(h5_path, root, name) for name in names}
-    except MeasurementFileError:
-        raise
-    except (OSError, KeyError, ValueError, TypeError, RuntimeError, AttributeError) as e:
-        # a damaged file fails anywhere inside h5py: all of them are "not readable"
-        raise MeasurementFileError(h5_path, f"not a readable HDF5 weights file: {e}") from None
-
-
-def _layer_weights(h5_path: Path, root: Any, name: str) -> dict[str, np.ndarray]:
-    if name not in root:
-        raise MeasurementFileError(h5_path, f"no weights for layer {name!r}")
-    group = root[name]
-    found: dict[str, np.ndarray] = {}
-    for wname in group.attrs.get("weight_names", []):
-        wname = wname.decode() if isinstance(wname, bytes) else str(wname)
-        key = wname.rsplit("/", 1)[-1].split(":")[0]
-        if key in ("kernel", "bias"):
-            found[key] = np.asarray(group[wname])
-    return found
-
-
-def _build_layers(
-    h5_path: Path, specs: list[dict[str, Any]], weights: dict[str, dict[str, np.ndarray]]
-) -> tuple[DenseLayer, ...]:
-    layers = []
-    n_in = specs[0]["n_in"] or N_INPUTS
-    if n_in != N_INPUTS:
-        raise MeasurementFileError(h5_path, f"the model takes {n_in} inputs; expected {N_INPUTS}")
-    for spec in specs:
-        w = weights[spec["name"]]
-        expected = {"kernel": (n_in, spec["units"])}
-        if spec["use_bias"]:
-            expected["bias"] = (spec["units"],)
-        for key, shape in expected.items():
-            got = w[key].shape if key in w else "missing"
-            if got != shape:
-                raise MeasurementFileError(
-                    h5_path,
-                    f"layer {spec['name']!r} {key} has shape {got}; the architecture "
-                    f"(units={spec['units']}, {n_in} inputs) expects {shape}",
-                )
-        bias = w["bias"] if spec["use_bias"] else np.zeros(spec["units"], np.float32)
-        kernel, bias = np.array(w["kernel"]), np.array(bias)
-        if not (np.isfinite(kernel).all() and np.isfinite(bias).all()):
-            raise MeasurementFileError(h5_path, f"layer {spec['name']!r} has NaN/Inf weights")
-        kernel.setflags(write=False)
-        bias.setflags(write=False)
-        layers.append(DenseLayer(spec["name"], kernel, bias, spec["activation"]))
-        n_in = spec["units"]
-    if n_in != N_OUTPUTS:
-        raise MeasurementFileError(h5_path, f"the model gives {n_in} outputs; expected {N_OUTPUTS}")
-    return tuple(layers)

@@ -52,6 +52,7 @@ Mitsuba variant is left alone.
 from __future__ import annotations
 
 import contextlib
+import importlib.util
 import io
 import os
 import subprocess
@@ -64,8 +65,9 @@ from jaxtyping import ArrayLike, Float
 
 from brdffit.core.measurements import Measurements
 from brdffit.errors import MeasurementFileError, MissingDependencyError, ParameterError
-from brdffit.io.merl import merl_grid, merl_grid_measurements
+from brdffit.io.merl_grid import merl_grid, merl_grid_measurements
 from brdffit.io.rgl_header import RglFile, rgl_header
+from brdffit.io.spectra import spectral_weights
 
 GRAZING_DEG: float = 85.0
 """Default zenith cut (degrees) of :func:`read_rgl` and :func:`read_rgl_at`."""
@@ -116,8 +118,6 @@ np.save(out_path, out)
 
 
 def _check_mitsuba() -> None:
-    import importlib.util
-
     if importlib.util.find_spec("mitsuba") is None:
         raise MissingDependencyError(
             "reading RGL .bsdf files needs Mitsuba 3: pip install 'brdffit[rgl]' "
@@ -127,9 +127,7 @@ def _check_mitsuba() -> None:
 
 def _rgb_copy(header: RglFile, folder: Path) -> Path:
     """An RGB file with the spectral file's tables converted to linear sRGB, in ``folder``."""
-    from mitsuba.python import tensor_io
-
-    from brdffit.io.spectra import spectral_weights
+    from mitsuba.python import tensor_io  # deferred: optional dependency
 
     with contextlib.redirect_stdout(io.StringIO()):  # tensor_io prints a line per call
         t = tensor_io.read(header.path)
@@ -273,7 +271,7 @@ def read_rgl(
 
     Arguments:
     - ``path``: the ``.bsdf`` file (RGB or spectral, isotropic or anisotropic).
-    - ``stride``: the grid, as in :func:`brdffit.io.merl.merl_grid`; the full grid (1.46 M
+    - ``stride``: the grid, as in :func:`brdffit.io.merl_grid.merl_grid`; the full grid (1.46 M
       cells) gives ``grid = MERL_SHAPE``, so the result can be written with
       :func:`brdffit.io.merl.write_merl`.
     - ``grazing_deg``: zenith cut in degrees for ``wi`` and ``wo`` (module docstring).

@@ -23,7 +23,7 @@ from brdffit.core.abstract_model import AbstractModel
 from brdffit.core.geometry import uniform_hemisphere
 from brdffit.core.measurements import Measurements
 from brdffit.errors import ParameterError
-from brdffit.io.merl import merl_grid, merl_grid_measurements
+from brdffit.io.merl_grid import merl_grid, merl_grid_measurements
 
 
 def _params(model: AbstractModel, params: Mapping[str, object]) -> dict:

@@ -39,7 +39,6 @@ def _registry() -> dict[str, type[AbstractModel]]:
     return dict(sorted(found.items()))
 
 
-
 def available() -> list[str]:
     """Registry names of every model, sorted."""
     return list(_registry())

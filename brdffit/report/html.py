@@ -7,10 +7,10 @@ atomically (:mod:`brdffit.util.atomic`).
 * :func:`write_fit_html`: the fit's statistics (metric and its value, every other
   metric, noise model, status, steps, samples), its parameters as value +/- standard
   error with start values and flags, its warnings, and the three figures of
-  :mod:`brdffit.figures` (lit spheres, in-plane curves, theta_h x theta_d images).
+  :mod:`brdffit.report.figures` (lit spheres, in-plane curves, theta_h x theta_d images).
 * :func:`write_sweep_html`: ``<sweep_dir>/report.html`` with, per metric, the tables
-  and figures of the Markdown sweep report (:func:`brdffit.report.markdown.write_report`), made
-  by the same public functions of :mod:`brdffit.selection.crossrank` and :mod:`brdffit.selection.pareto`.
+  and figures of the Markdown sweep report (:func:`brdffit.report.markdown.write_report`),
+  computed once for both (:func:`brdffit.report.sweep_sections.metric_sections`).
 """
 
 from __future__ import annotations
@@ -30,7 +30,10 @@ import numpy as np
 from brdffit.core.measurements import Measurements
 from brdffit.core.result import FitResult, errors_assumed
 from brdffit.errors import MeasurementsError
-from brdffit.selection.crossrank import SweepResults
+from brdffit.report.sweep_sections import metric_sections, read_sweep
+from brdffit.selection.rank import NOTE, TIES
+from brdffit.selection.survival import survival_table
+from brdffit.selection.sweep_results import SweepResults
 from brdffit.util.atomic import write_text
 
 STYLE = """
@@ -55,7 +58,7 @@ pre { background: #f6f6f6; padding: 0.6em; font-size: 12px; white-space: pre-wra
 
 def png_data_uri(fig: object, dpi: int = 90) -> str:
     """A matplotlib figure as a ``data:image/png;base64,...`` URI (closed if pyplot has it)."""
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # deferred: heavy, figures only
 
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=dpi, bbox_inches="tight", pad_inches=0.1)
@@ -68,6 +71,14 @@ def _figure(fig: object, alt: str, caption: str) -> str:
         f'<figure><img alt="{html.escape(alt)}" src="{png_data_uri(fig)}">'
         f"<figcaption>{html.escape(caption)}</figcaption></figure>"
     )
+
+
+def _figure_or_note(fig: object | None, note: str, alt: str, caption: str) -> str:
+    """The figure, or where there is none (:class:`~brdffit.report.sweep_sections.MetricSection`)
+    the note saying why."""
+    if fig is None:
+        return f'<p class="note">{html.escape(note)}</p>'
+    return _figure(fig, alt, caption)
 
 
 def _is_number(text: str) -> bool:
@@ -106,7 +117,8 @@ def _from_csv(text: str) -> str:
 
 
 def _from_markdown(text: str) -> str:
-    """A table of :func:`brdffit.util.text_table.render` in Markdown (cells hold no ``|``) as HTML."""
+    """A table of :func:`brdffit.util.text_table.render` in Markdown (cells hold no ``|``)
+    as HTML."""
     lines = [ln.strip() for ln in text.strip().splitlines() if ln.strip()]
     rows = [[c.strip() for c in ln.strip("|").split("|")] for ln in lines]
     return html_table(rows[0], rows[2:]) if rows else ""
@@ -188,7 +200,7 @@ def fit_html(
     result: FitResult, data: Measurements, *, title: str | None = None, sphere_size: int = 128
 ) -> str:
     """The HTML text of :func:`write_fit_html` (arguments there)."""
-    from brdffit.report import figures
+    from brdffit.report import figures  # deferred: imports matplotlib
 
     source = result.source.split(" (", 1)[0]  # readers describe a path as "NAME (PATH)"
     title = title or f"brdffit: {result.model} fitted to {Path(source).name or source}"
@@ -291,46 +303,35 @@ def sweep_html(
     families: str | os.PathLike[str] | None = None,
 ) -> str:
     """The HTML text of :func:`write_sweep_html` (arguments there)."""
-    from brdffit.report.markdown import MAX_INLINE_ROWS
-    from brdffit.selection.crossrank import (
-        aggregate,
-        aggregate_table,
-        family_table,
-        load_sweep,
-        matrices,
-        per_material_table,
-        rank_matrix_figure,
-    )
-    from brdffit.selection.families import read_families
-    from brdffit.selection.pareto import error_vs_time, pareto_caption, pareto_figure, pareto_table
-    from brdffit.selection.rank import NOTE, TIES
-    from brdffit.selection.survival import survival_table
-
-    res = load_sweep(sweep_dir, read_families(families) if families else None)
+    res = read_sweep(sweep_dir, families)
     title = f"brdffit sweep report: {Path(sweep_dir).resolve().name}"
     body = [f"<h1>{html.escape(title)}</h1>", *_sweep_header(res)]
     body.append(f'<p class="note">{html.escape(TIES)} {html.escape(NOTE)}</p>')
-    for metric in res.metrics:
-        mx = matrices(res, metric)
-        agg = aggregate(mx, n_boot=n_boot, seed=seed)
-        par = error_vs_time(res, metric)
-        body += [f"<h2>Metric {html.escape(metric)}</h2>", "<h3>Ranking over all materials</h3>"]
-        body.append(_from_markdown(aggregate_table(agg)))
-        body.append(_figure(rank_matrix_figure(mx, agg), "rank matrix", "Rank per material."))
-        body += ["<h3>Best models per material family</h3>", _from_csv(family_table(mx, "csv"))]
-        body.append("<h3>Fit error against run time</h3>")
+    for sec in metric_sections(res, n_boot=n_boot, seed=seed):
+        body += [
+            f"<h2>Metric {html.escape(sec.metric)}</h2>",
+            "<h3>Ranking over all materials</h3>",
+        ]
+        body.append(_from_markdown(sec.aggregate.markdown))
         body.append(
-            f'<p class="note">Over which materials: {html.escape(pareto_caption(par))}.</p>'
-        )
-        body.append(_from_csv(pareto_table(par, "csv")))
-        body.append(_figure(pareto_figure(par), "Pareto plot", "Red: the Pareto front."))
+            _figure_or_note(sec.rank_matrix, sec.rank_matrix_note, "rank matrix",
+                            "Rank per material.")
+        )  # fmt: skip
+        body += ["<h3>Best models per material family</h3>", _from_csv(sec.families.csv)]
+        body.append("<h3>Fit error against run time</h3>")
+        body.append(f'<p class="note">Over which materials: {html.escape(sec.caption)}.</p>')
+        body.append(_from_csv(sec.pareto.csv))
+        body.append(
+            _figure_or_note(sec.pareto_plot, sec.pareto_note, "Pareto plot",
+                            "Red: the Pareto front.")
+        )  # fmt: skip
         body.append("<h3>Per material</h3>")
-        if len(mx.materials) * len(mx.models) <= MAX_INLINE_ROWS:
-            body.append(_from_csv(per_material_table(mx, "csv")))
+        if sec.inline:
+            body.append(_from_csv(sec.per_material.csv))
         else:
             body.append(
-                f'<p class="note">{len(mx.materials) * len(mx.models)} rows: see '
-                f"report/per_material_{html.escape(metric)}.csv.</p>"
+                f'<p class="note">{sec.n_rows} rows: see '
+                f"report/per_material_{html.escape(sec.metric)}.csv.</p>"
             )
     survivors = survival_table(sweep_dir, fmt="text")  # "" unless the sweep ran --simplify
     if survivors:

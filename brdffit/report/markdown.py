@@ -3,7 +3,9 @@
 ``write_report(sweep_dir)`` writes ``<sweep_dir>/report/report.md`` and beside it,
 per metric, the CSV tables (``aggregate_<metric>.csv``, ``per_material_<metric>.csv``,
 ``pareto_<metric>.csv``, ``families_<metric>.csv``) and the figures
-(``rank_matrix_<metric>.png``, ``pareto_<metric>.png``). The text holds no date and no
+(``rank_matrix_<metric>.png``, ``pareto_<metric>.png``; where the results cannot fill
+one, the report says why instead), all computed once for this report and the HTML one
+(:func:`brdffit.report.sweep_sections.metric_sections`). The text holds no date and no
 absolute path and the bootstrap is seeded, so the same JSON files give the same report.
 Material families come from a user's ``material,family`` CSV file when one is given
 (:func:`brdffit.selection.families.read_families`), else from the sweep's manifest.
@@ -15,22 +17,10 @@ import os
 from collections import Counter
 from pathlib import Path
 
-from brdffit.selection.crossrank import (
-    aggregate,
-    aggregate_table,
-    family_table,
-    load_sweep,
-    matrices,
-    per_material_table,
-    rank_matrix_figure,
-)
-from brdffit.selection.families import read_families
-from brdffit.selection.pareto import error_vs_time, pareto_caption, pareto_figure, pareto_table
+from brdffit.report.sweep_sections import metric_sections, read_sweep
 from brdffit.selection.rank import LOSS_RTOL, NOTE, PER_SAMPLE
 from brdffit.selection.survival import survival_table
 from brdffit.util.atomic import save_figure, write_text
-
-MAX_INLINE_ROWS = 200
 
 SAVE = {"dpi": 90, "bbox_inches": "tight", "pad_inches": 0.1}
 """How the report's figures are saved: the canvas grows to hold every label."""
@@ -104,12 +94,18 @@ def _errors(res) -> list[str]:
 
 
 def _unreadable(res) -> list[str]:
-    """The result files the report left out, each with why (:func:`load_sweep`)."""
+    """The result files the report left out, each with why
+    (:func:`brdffit.selection.sweep_results.load_sweep`)."""
     if not res.unreadable:
         return []
     lines = ["## Unreadable result files (left out of this report)", ""]
     lines += [f"- `{path}`: {why}" for path, why in res.unreadable]
     return lines + [""]
+
+
+def _figure_line(fig: object | None, note: str, alt: str, name: str, metric: str) -> str:
+    """The Markdown image of a saved figure, or the note saying why there is none."""
+    return f"![{alt}]({name}_{metric}.png)" if fig is not None else f"_{note}_"
 
 
 def write_report(
@@ -127,56 +123,53 @@ def write_report(
     ``sweep.json`` or the families file is not usable. Figures are saved with a tight
     bounding box, so no label is cut off.
     """
-    import matplotlib
+    import matplotlib  # deferred: heavy, figures only
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # deferred: heavy, figures only
 
-    res = load_sweep(sweep_dir, read_families(families) if families else None)
+    res = read_sweep(sweep_dir, families)
     out = Path(sweep_dir) / "report"
     out.mkdir(parents=True, exist_ok=True)
     lines = _header(res)
-    for metric in res.metrics:
-        mx = matrices(res, metric)
-        agg = aggregate(mx, n_boot=n_boot, seed=seed)
-        par = error_vs_time(res, metric)
-        write_text(out / f"aggregate_{metric}.csv", aggregate_table(agg, "csv"))
-        write_text(out / f"per_material_{metric}.csv", per_material_table(mx, "csv"))
-        write_text(out / f"pareto_{metric}.csv", pareto_table(par, "csv"))
-        write_text(out / f"families_{metric}.csv", family_table(mx, "csv"))
-        fig = rank_matrix_figure(mx, agg)
-        save_figure(fig, out / f"rank_matrix_{metric}.png", **SAVE)
-        plt.close(fig)
-        fig = pareto_figure(par)
-        save_figure(fig, out / f"pareto_{metric}.png", **SAVE)
-        plt.close(fig)
+    for sec in metric_sections(res, n_boot=n_boot, seed=seed):
+        metric = sec.metric
+        write_text(out / f"aggregate_{metric}.csv", sec.aggregate.csv)
+        write_text(out / f"per_material_{metric}.csv", sec.per_material.csv)
+        write_text(out / f"pareto_{metric}.csv", sec.pareto.csv)
+        write_text(out / f"families_{metric}.csv", sec.families.csv)
+        for fig, name in ((sec.rank_matrix, "rank_matrix"), (sec.pareto_plot, "pareto")):
+            if fig is not None:
+                save_figure(fig, out / f"{name}_{metric}.png", **SAVE)
+                plt.close(fig)
         lines += [
             f"## Metric `{metric}`",
             "",
             "### Ranking over all materials",
             "",
-            aggregate_table(agg),
-            f"![rank matrix](rank_matrix_{metric}.png)",
+            sec.aggregate.markdown,
+            _figure_line(
+                sec.rank_matrix, sec.rank_matrix_note, "rank matrix", "rank_matrix", metric
+            ),
             "",
             "### Best models per material family",
             "",
-            family_table(mx),
+            sec.families.markdown,
             "### Fit error against run time",
             "",
-            f"Over which materials: {pareto_caption(par)}.",
+            f"Over which materials: {sec.caption}.",
             "",
-            pareto_table(par),
-            f"![Pareto plot](pareto_{metric}.png)",
+            sec.pareto.markdown,
+            _figure_line(sec.pareto_plot, sec.pareto_note, "Pareto plot", "pareto", metric),
             "",
             "### Per material",
             "",
         ]
-        n_rows = len(mx.materials) * len(mx.models)
-        if n_rows <= MAX_INLINE_ROWS:
-            lines += [per_material_table(mx), f"_{NOTE}_", ""]
+        if sec.inline:
+            lines += [sec.per_material.markdown, f"_{NOTE}_", ""]
         else:
-            lines += [f"{n_rows} rows: see [per_material_{metric}.csv](per_material_{metric}.csv)."]
-            lines += [""]
+            csv = f"per_material_{metric}.csv"
+            lines += [f"{sec.n_rows} rows: see [{csv}]({csv}).", ""]
     survivors = survival_table(sweep_dir)  # "" unless the sweep ran with --simplify
     if survivors:
         lines += ["## Model reduction (sweep --simplify)", "", survivors, ""]

@@ -12,7 +12,7 @@ Fit side (:func:`model_brdf`): a fit (a :class:`~brdffit.core.result.FitResult`,
 ``(model, params)`` pair) evaluated by its jitted ``model.eval`` at any directions.
 
 Data side (:func:`nearest_bin`): samples on the MERL grid or a strided sub-grid of it
-(:func:`brdffit.io.merl.merl_grid`, :func:`merl_stride`), read by nearest-bin lookup, the
+(:func:`brdffit.io.merl_grid.merl_grid`, :func:`merl_stride`), read by nearest-bin lookup, the
 MERL reader's rule (:func:`brdffit.core.geometry.merl_indices`), a strided sample standing for
 its whole coarse cell. A channel of a bin that is not fitted (not measured, outside the
 reader's cut, or the bin centre below the horizon) gives NaN; with ``fill=True`` it takes
@@ -56,7 +56,7 @@ from brdffit.core.geometry import MERL_SHAPE, above_horizon, io_to_halfdiff, mer
 from brdffit.core.measurements import Measurements
 from brdffit.core.result import FitResult
 from brdffit.errors import MeasurementsError
-from brdffit.io.merl import merl_grid
+from brdffit.io.merl_grid import merl_grid
 
 Fit = FitResult | tuple[AbstractModel, Mapping[str, object]]
 Brdf = Callable[[np.ndarray, np.ndarray], np.ndarray]
@@ -94,7 +94,7 @@ def merl_stride(data: Measurements) -> tuple[int, int, int]:
     """The stride of the MERL (sub-)grid ``data`` lies on, in file order.
 
     Raises :class:`MeasurementsError` naming the source when the samples are scattered
-    directions rather than a MERL grid (:func:`brdffit.io.merl.merl_grid`).
+    directions rather than a MERL grid (:func:`brdffit.io.merl_grid.merl_grid`).
     """
     if data.grid == MERL_SHAPE:
         return (1, 1, 1)
@@ -119,7 +119,7 @@ def nearest_bin(
 ) -> np.ndarray:
     """Data values (n, 3) in 1/sr at arbitrary directions, by nearest MERL bin.
 
-    As MERL's ``lookup_brdf_val`` (:func:`brdffit.io.merl.lookup`), on the full grid or a
+    As MERL's ``lookup_brdf_val`` (:func:`brdffit.io.merl_grid.lookup`), on the full grid or a
     strided one (a sample stands for its coarse cell). Directions below the horizon give
     0; a channel that ``data.channel_valid`` marks unfitted gives NaN, or with ``fill``
     the value of the nearest bin whose channel is measured (:func:`filled_values`).
@@ -142,7 +142,7 @@ def filled_values(data: Measurements, shape: tuple[int, int, int]) -> np.ndarray
     in the nearest fitted bin (Euclidean distance in (theta_h, theta_d, phi_d) bin
     indices; ``scipy.ndimage.distance_transform_edt``). A channel with no fitted bin
     stays NaN."""
-    from scipy.ndimage import distance_transform_edt
+    from scipy.ndimage import distance_transform_edt  # deferred: scipy submodule
 
     out = np.full(data.values.shape, np.nan)
     for c in range(3):
@@ -337,7 +337,7 @@ def delta_e(a: np.ndarray, b: np.ndarray, exposure: float) -> np.ndarray:
     difference; a hue shift counts as much as a change of lightness. NaN in either
     image gives NaN.
     """
-    import colour
+    import colour  # deferred: heavy, colour difference only
 
     def lab(x: np.ndarray) -> np.ndarray:
         rgb = np.clip(exposure * np.nan_to_num(x), 0.0, 1.0)

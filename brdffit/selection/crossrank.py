@@ -1,5 +1,10 @@
 """Ranking of models across many materials, from a sweep folder's JSON files alone.
 
+The folder is read by :func:`brdffit.selection.sweep_results.load_sweep`; this module
+turns its results into materials x models arrays (:func:`matrices`), the aggregate
+ranking and its tables, and the row order of the rank matrix
+(:func:`brdffit.report.selection_figures.rank_matrix_figure` draws it).
+
 Per material, the models fitted under one metric are ranked as :func:`brdffit.rank`
 does (by the metric value, losses within a relative :data:`~brdffit.selection.rank.LOSS_RTOL`
 tied and given their average rank; AIC and BIC ranks beside it; a fit that did not
@@ -17,172 +22,18 @@ sweep manifest, else :func:`brdffit.selection.families.family_of`.
 
 from __future__ import annotations
 
-import json
 import math
-import os
 import warnings
-from dataclasses import dataclass, field
-from pathlib import Path
+from dataclasses import dataclass
 
 import numpy as np
 
-from brdffit.core.result import loss_kind, per_sample
+from brdffit.core.result import loss_kind
 from brdffit.errors import SweepError
-from brdffit.selection.families import FAMILIES, family_of
+from brdffit.selection.families import FAMILIES
 from brdffit.selection.rank import LOSS_RTOL, rank_text, ranks
+from brdffit.selection.sweep_results import SweepResults
 from brdffit.util.text_table import render
-
-
-@dataclass(frozen=True)
-class Record:
-    """One result file of a sweep, the fields the ranking and the Pareto study read.
-
-    ``loss`` is the value of ``metric`` (the one fitted), ``losses`` every metric on
-    the same samples; ``wall_time`` in s; ``eval_ns`` ns per sample (``nan`` if not
-    timed); ``status`` the :class:`brdffit.Status` name; ``provenance`` a short label
-    of the code and device that computed it (``"unrecorded"`` in older sweeps).
-    ``model`` is the label of the fitted variant (``walter``, ``lafortune[n_lobes=2]``),
-    the result file's ``label`` (older sweeps, default options only: its ``model``).
-    """
-
-    material: str
-    family: str
-    model: str
-    metric: str
-    loss: float
-    losses: dict
-    aic: float
-    bic: float
-    n_free: int
-    converged: bool
-    status: str
-    wall_time: float
-    eval_ns: float
-    provenance: str = "unrecorded"
-    loss_per_sample: float = math.nan
-
-
-@dataclass(frozen=True)
-class SweepResults:
-    """A sweep folder read back: manifest, results (sorted), recorded errors, and the
-    result files that could not be read (``unreadable``: (path relative to the folder,
-    why) pairs; the report lists them and goes on without them)."""
-
-    manifest: dict
-    records: tuple[Record, ...]
-    errors: tuple[dict, ...]
-    families: dict = field(default_factory=dict)
-    unreadable: tuple[tuple[str, str], ...] = ()
-
-    @property
-    def materials(self) -> list[str]:
-        """Materials of the manifest, in its order."""
-        return list(self.manifest["materials"])
-
-    @property
-    def models(self) -> list[str]:
-        """Model labels of the manifest, in its order."""
-        return list(self.manifest["models"])
-
-    @property
-    def metrics(self) -> list[str]:
-        """Metrics of the manifest, in its order."""
-        return list(self.manifest["metrics"])
-
-    def family(self, material: str) -> str:
-        """Family from ``families`` (a user's file), else the manifest, else the name."""
-        if material in self.families:
-            return self.families[material]
-        m = self.manifest["materials"].get(material, {})
-        return m.get("family") or family_of(material)
-
-
-def provenance_label(d: dict | None) -> str:
-    """``brdffit 0.1.0 (git f1ea536), jax 0.10.2 on cpu (cpu)`` from a result's provenance."""
-    if not d:
-        return "unrecorded"
-    return (
-        f"brdffit {d.get('brdffit')} (git {d.get('git')}), jax {d.get('jax')} "
-        f"on {d.get('backend')} ({d.get('device')})"
-    )
-
-
-def _record_family(d: dict, families: dict[str, str]) -> str:
-    return families.get(d["material"]) or d.get("family") or family_of(d["material"])
-
-
-def _num(x: object) -> float:
-    return float("nan") if x is None else float(x)
-
-
-def load_sweep(
-    sweep_dir: str | os.PathLike[str], families: dict[str, str] | None = None
-) -> SweepResults:
-    """Read ``sweep.json`` and every ``<material>/<label>__<metric>[.error].json``.
-
-    ``families``: material -> family, replacing the recorded ones for those materials.
-    A result file that does not parse or lacks a field (truncated, foreign) is skipped
-    and listed in ``unreadable``. Raises :class:`SweepError` when ``sweep.json`` is
-    missing or is not a sweep manifest.
-    """
-    families = dict(families or {})
-    root = Path(sweep_dir)
-    try:
-        manifest = json.loads((root / "sweep.json").read_text())
-    except (OSError, ValueError) as e:
-        raise SweepError(f"{root}: not a sweep folder (sweep.json: {e})") from e
-    if not (
-        isinstance(manifest, dict)
-        and isinstance(manifest.get("materials"), dict)
-        and isinstance(manifest.get("settings"), dict)
-        and all(isinstance(manifest.get(k), dict | list) for k in ("models", "metrics"))
-    ):
-        raise SweepError(
-            f"{root / 'sweep.json'}: not a sweep manifest (expected an object with "
-            "materials, models, metrics and settings)"
-        )
-    records, errors, unreadable = [], [], []
-    for p in sorted(root.glob("*/*.json")):
-        try:
-            d = json.loads(p.read_text())
-            if not isinstance(d, dict):
-                raise TypeError(f"a JSON {type(d).__name__}, not an object")
-            if p.name.endswith(".error.json"):
-                missing = [k for k in ("material", "model", "metric", "error") if k not in d]
-                if missing:
-                    raise KeyError(", ".join(missing))
-                errors.append(d)
-            else:
-                records.append(_record(d, families))
-        except (OSError, ValueError, KeyError, TypeError, AttributeError) as e:
-            why = f"missing field {e}" if isinstance(e, KeyError) else str(e) or type(e).__name__
-            unreadable.append((str(p.relative_to(root)), " ".join(why.split())))
-    return SweepResults(manifest, tuple(records), tuple(errors), families, tuple(unreadable))
-
-
-def _record(d: dict, families: dict[str, str]) -> Record:
-    """The :class:`Record` of a result file's JSON object (``KeyError`` for a missing
-    field, ``ValueError``/``TypeError`` for a value of the wrong kind)."""
-    for key in ("material", "metric"):
-        if not isinstance(d[key], str):
-            raise TypeError(f"field {key!r} is {d[key]!r}, not a string")
-    return Record(
-        material=d["material"],
-        family=_record_family(d, families),
-        model=str(d.get("label") or d["model"]),
-        metric=d["metric"],
-        loss=_num(d["loss"]),
-        losses={k: _num(v) for k, v in d.get("losses", {}).items()},
-        aic=_num(d.get("aic")),
-        bic=_num(d.get("bic")),
-        n_free=int(d.get("n_free", 0)),
-        converged=bool(d.get("converged", False)),
-        status=str(d.get("status", "")),
-        wall_time=_num(d.get("wall_time")),
-        eval_ns=_num(d.get("eval_ns_per_sample")),
-        provenance=provenance_label(d.get("provenance")),
-        loss_per_sample=per_sample(d["metric"], _num(d["loss"]), d.get("n_samples", 0)),
-    )
 
 
 @dataclass(frozen=True)
@@ -395,11 +246,11 @@ def cluster_order(vectors: np.ndarray) -> np.ndarray:
     n = len(vectors)
     if n < 3:
         return np.arange(n)
-    from scipy.cluster.hierarchy import leaves_list, linkage, optimal_leaf_ordering
+    from scipy.cluster import hierarchy  # deferred: scipy submodule, clustering only
 
     x = np.asarray(vectors, float)
-    tree = optimal_leaf_ordering(linkage(x, method="average", metric="euclidean"), x)
-    order = leaves_list(tree)
+    tree = hierarchy.linkage(x, method="average", metric="euclidean")
+    order = hierarchy.leaves_list(hierarchy.optimal_leaf_ordering(tree, x))
     order = list(order if order[0] < order[-1] else order[::-1])
     start = 0
     for pos in range(1, n + 1):  # runs of identical rows in their original order
@@ -422,42 +273,3 @@ def material_order(mx: Matrices) -> np.ndarray:
         groups.setdefault(mx.families[i], []).append(i)
     out = [np.array(g)[cluster_order(mx.rank[g])] for g in groups.values()]
     return np.concatenate(out).astype(int) if out else np.zeros(0, int)
-
-
-def rank_matrix_figure(mx: Matrices, rows: tuple[AggregateRow, ...] | None = None):
-    """Image of ranks, materials (:func:`material_order`) x models (best mean rank first).
-
-    A rank reached by a fit that did not converge is marked ``*``. The figure is sized
-    from its labels (constrained layout; the image at least 2.2 in tall, so the colour
-    bar holds its label), so no label is cut off.
-    """
-    import matplotlib.pyplot as plt
-
-    order = material_order(mx)
-    cols = [mx.models.index(r.model) for r in (rows or aggregate(mx, n_boot=1))]
-    img = mx.rank[np.ix_(order, cols)]
-    n, k = img.shape
-    ylabels = [f"{mx.families[i]}: {mx.materials[i]}" for i in order]
-    xlabels = [mx.models[c] for c in cols]
-    y_room, x_room = (0.06 * max(map(len, lab), default=0) for lab in (ylabels, xlabels))
-    size = (1.9 + 0.55 * k + y_room, 1.1 + max(0.25 * n, 2.2) + 0.87 * x_room)
-    fig, ax = plt.subplots(figsize=size, layout="constrained")
-    im = ax.imshow(img, cmap="viridis_r", aspect="auto", vmin=1, vmax=max(k, 2))
-    ax.set_xticks(range(k), xlabels, rotation=60, ha="right", rotation_mode="anchor", fontsize=8)
-    ax.set_yticks(range(n), ylabels, fontsize=7)
-    fams = [mx.families[i] for i in order]
-    for y in range(1, n):
-        if fams[y] != fams[y - 1]:
-            ax.axhline(y - 0.5, color="w", lw=2)
-    ok = np.ones_like(img, bool) if mx.converged is None else mx.converged[np.ix_(order, cols)]
-    unconverged = np.isfinite(mx.loss[np.ix_(order, cols)]) & ~ok
-    if n * k <= 400:
-        for y in range(n):
-            for x in range(k):
-                c = "k" if img[y, x] <= (k + 1) / 2 else "w"
-                t = rank_text(img[y, x]) + ("*" if unconverged[y, x] else "")
-                ax.text(x, y, t, ha="center", va="center", fontsize=7, color=c)
-    fig.colorbar(im, ax=ax, label="rank (1 = best)")
-    note = "; * not converged" if unconverged.any() else ""
-    ax.set_title(f"rank by {mx.metric} per material{note}", fontsize=10)
-    return fig

@@ -13,8 +13,9 @@ Per model and fitted metric: the median of the metric value (as the metric defin
 and per sample, :func:`brdffit.core.result.per_sample`), of the relative error ``loss / best
 - 1``, of the fit wall time (s, the fit's own clock in the sweep worker, compile
 included on a worker's first fit, hence the median) and of the evaluation cost (ns per
-sample, warm jitted ``model.eval``; :mod:`brdffit.sweep`). A model is on the Pareto front
+sample, warm jitted ``model.eval``; :mod:`brdffit.sweep.run`). A model is on the Pareto front
 when no other model is at least as good in both error and time and better in one.
+:func:`brdffit.report.selection_figures.pareto_figure` draws the rows.
 """
 
 from __future__ import annotations
@@ -24,7 +25,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from brdffit.core.result import loss_kind
-from brdffit.selection.crossrank import SweepResults, matrices
+from brdffit.selection.crossrank import matrices
+from brdffit.selection.sweep_results import SweepResults
 from brdffit.util.text_table import render
 
 
@@ -157,67 +159,3 @@ def pareto_table(rows: tuple[ParetoRow, ...], fmt: str = "markdown") -> str:
         for r in rows
     ]
     return render(head, body, fmt)
-
-
-def _log_axis(axis, values: np.ndarray) -> None:
-    """Log scale whose tick labels do not collide: no minor labels, and majors at 1, 2, 5
-    per decade when the data span less than a decade (else matplotlib's decades)."""
-    from matplotlib import ticker
-
-    v = values[np.isfinite(values) & (values > 0)]
-    axis.set_minor_formatter(ticker.NullFormatter())
-    if v.size and np.log10(v.max() / v.min()) < 1.0:
-        axis.set_major_locator(ticker.LogLocator(base=10, subs=(1.0, 2.0, 5.0)))
-        axis.set_major_formatter(ticker.FuncFormatter(lambda v, _: f"{v:g}"))
-
-
-def pareto_figure(rows: tuple[ParetoRow, ...]):
-    """Two panels: median error against median fit time and against evaluation cost.
-
-    Log axes; the Pareto front is the red staircase, front models in red; the caption
-    says which materials the medians are over (:func:`pareto_caption`). Model names sit
-    beside their points on the side facing the middle of the panel, so they stay inside
-    it; constrained layout keeps every label in the figure.
-    """
-    import matplotlib.pyplot as plt
-
-    fig, axes = plt.subplots(1, 2, figsize=(11, 4.6), sharey=True, layout="constrained")
-    y = np.array([r.median_loss for r in rows])
-    for ax, attr, front, label in (
-        (axes[0], "median_wall_time", "front_time", "median fit wall time (s)"),
-        (axes[1], "median_eval_ns", "front_eval", "evaluation cost (ns/sample)"),
-    ):
-        x = np.array([getattr(r, attr) for r in rows])
-        on = np.array([getattr(r, front) for r in rows], bool)
-        ok = np.isfinite(x) & np.isfinite(y) & (x > 0) & (y > 0)
-        ax.scatter(x[ok & ~on], y[ok & ~on], color="0.5", s=20)
-        ax.scatter(x[ok & on], y[ok & on], color="C3", s=30, zorder=3)
-        ax.set_xscale("log")
-        ax.set_yscale("log")
-        if ok.any():
-            lo, hi = np.log10(x[ok].min()), np.log10(x[ok].max())
-            pad = max(0.15 * (hi - lo), 0.1)
-            ax.set_xlim(10 ** (lo - pad), 10 ** (hi + pad))
-        mid = np.mean(np.log10(ax.get_xlim()))
-        for r, xi, yi, good in zip(rows, x, y, ok, strict=True):
-            if good:
-                right = np.log10(xi) > mid
-                ax.annotate(
-                    r.model, (xi, yi), fontsize=7, textcoords="offset points",
-                    xytext=(-4 if right else 4, 3), ha="right" if right else "left",
-                )  # fmt: skip
-        idx = np.flatnonzero(ok & on)
-        if idx.size:
-            idx = idx[np.argsort(x[idx])]
-            ax.step(x[idx], y[idx], where="post", color="C3", lw=1)
-        _log_axis(ax.xaxis, x)
-        ax.set_xlabel(label)
-    _log_axis(axes[0].yaxis, y)
-    metric = rows[0].metric if rows else "loss"
-    relative = bool(rows) and rows[0].basis == "relative"
-    axes[0].set_ylabel(f"median {metric} / best" if relative else f"median {metric}")
-    fig.suptitle(
-        f"fit error against run time ({metric}); red: Pareto front\n{pareto_caption(rows)}",
-        fontsize=10,
-    )
-    return fig

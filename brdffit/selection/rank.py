@@ -30,8 +30,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from brdffit import models
 from brdffit.core.result import FitResult, loss_kind
+from brdffit.engine.fit import fit
 from brdffit.errors import ParameterError
+from brdffit.models import label
+from brdffit.util.progress import progress_bar, progress_line
 from brdffit.util.text_table import render
 
 LOSS_RTOL = 1e-5
@@ -156,8 +160,6 @@ class Ranking:
 
 def _changed_options(r: FitResult) -> str:
     """The static options that differ from the model's defaults: the ``k=v,...`` of its label."""
-    from brdffit import models
-
     return models.label(r.model, r.options).partition("[")[2].removesuffix("]")
 
 
@@ -209,10 +211,6 @@ def fit_models(
     ``progress``: a bar on stderr and, as each fit ends, a line ``rank: <label>  <s> s
     <metric> <loss> (<status>)``. ``fit_kwargs`` go to :func:`brdffit.fit`.
     """
-    from brdffit.engine.fit import fit
-    from brdffit.models import label
-    from brdffit.util.progress import progress_bar, progress_line
-
     bar = progress_bar(len(models_), "rank", "fit", progress)
     out = []
     try:

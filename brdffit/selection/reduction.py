@@ -2,8 +2,10 @@
 
 :class:`Reduction` holds the search path (one :class:`PathRow` per fitted variant), the
 chosen variant's label and fit, the start model's fit and the settings; it prints the
-path as a table, plots the criterion against the parameter count, and names the
-features that were removed and those that survive (:func:`brdffit.selection.variants.features`).
+path as a table and names the features that were removed and those that survive
+(:func:`brdffit.selection.variants.features`).
+:meth:`Reduction.plot` draws the criterion against the parameter count (as
+:meth:`brdffit.Posterior.corner` draws a posterior: a result plots itself).
 """
 
 from __future__ import annotations
@@ -143,15 +145,11 @@ class Reduction:
             "result": self.result.to_dict(), "full": self.full.to_dict(),
         }  # fmt: skip
 
-    def to_json(self, indent: int | None = 2) -> str:
-        """The JSON text of :meth:`to_dict` (NaN and Inf written as null)."""
-        return json.dumps(nan_to_none(self.to_dict()), indent=indent)
-
     def plot(self, ax=None, y: str = "value"):
         """Criterion (``y="value"``) or in-sample loss (``y="loss"``) against the parameter
         count: every variant, the accepted path as a line, the chosen variant starred.
         Returns the axes."""
-        import matplotlib.pyplot as plt
+        import matplotlib.pyplot as plt  # deferred: heavy, figures only
 
         if ax is None:
             ax = plt.subplots(figsize=(5.5, 4.0))[1]
@@ -168,3 +166,7 @@ class Reduction:
         ax.set_title(f"{self.full_label} on {self.source}", fontsize=9)
         ax.legend(fontsize=8)
         return ax
+
+    def to_json(self, indent: int | None = 2) -> str:
+        """The JSON text of :meth:`to_dict` (NaN and Inf written as null)."""
+        return json.dumps(nan_to_none(self.to_dict()), indent=indent)

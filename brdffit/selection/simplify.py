@@ -28,8 +28,9 @@ Criteria:
   dealt so that every theta_h band and every theta_d band is spread evenly over the
   folds (:func:`~brdffit.selection.folds.deal_blocks`). Each fold is fitted on the other folds
   (from its parent's fit of the same fold; the start model's folds from its all-data
-  optimum) and scored on its own cells; the value is the metric of the out-of-fold
-  predictions. A variant is compared, fold by fold, with the variant of lowest
+  optimum) and scored on its own cells, all folds in one jitted fit
+  (:func:`~brdffit.selection.variant_fit.fit_variant`); the value is the metric of the
+  out-of-fold predictions. A variant is compared, fold by fold, with the variant of lowest
   held-out loss fitted so far, this step's included: ``r_j = ln(H_j / H_best,j)``,
   ``H_j`` the held-out sum of fold ``j``. The feature it lacks stays (the variant is
   rejected) when the data show that it lowers the held-out loss by more than
@@ -109,49 +110,26 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
-from dataclasses import dataclass
 
-import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
-from jax import lax
 
 from brdffit import models
 from brdffit.core.abstract_model import AbstractModel
 from brdffit.core.measurements import Measurements
 from brdffit.core.result import FitResult
-from brdffit.engine import lm, metrics, starts
+from brdffit.engine import lm, metrics
 from brdffit.engine.fit import fit
-from brdffit.engine.objective import Objective
 from brdffit.engine.timing import eval_seconds
 from brdffit.errors import ParameterError
-from brdffit.selection.folds import MIN_GAIN, deal_blocks, feature_test, fold_t, keep_threshold
+from brdffit.selection.folds import MIN_GAIN, deal_blocks, feature_test, keep_threshold
 from brdffit.selection.reduction import PathRow, Reduction
+from brdffit.selection.variant_fit import VariantFit, fit_variant, start_cost
 from brdffit.selection.variants import joint_move, moves
 from brdffit.util.progress import progress_bar, progress_line
 
-__all__ = [
-    "CRITERIA", "PathRow", "Reduction", "deal_blocks", "fold_t", "keep_threshold", "simplify"
-]  # fmt: skip
-
 CRITERIA = ("cv", "bic")
 STEPS = ("start", "removed")  # the decisions of the rows on the search's own path
-
-
-@dataclass(frozen=True)
-class _Node:
-    """A fitted variant: model, natural parameters per row (row 0 all data, rows 1.. the
-    folds' fits), free scalars, in-sample loss, BIC, held-out sums per fold, the
-    criterion's value, and whether every fit stayed finite."""
-
-    model: AbstractModel
-    rows: dict[str, np.ndarray]
-    n_free: int
-    loss: float
-    bic: float
-    held: np.ndarray  # (folds,) held-out weighted sums
-    value: float
-    ok: bool
 
 
 def simplify(
@@ -293,7 +271,7 @@ class _Search:
     def __init__(self, m, prep, train, criterion, n_se, min_gain, full: FitResult, kw: dict):
         self.m, self.prep, self.train, self.criterion, self.n_se = m, prep, train, criterion, n_se
         self.min_gain = min_gain
-        self.done: dict[str, _Node] = {}  # label -> fit: a variant reached twice is fitted once
+        self.done: dict[str, VariantFit] = {}  # label -> fit: a variant reached twice, fitted once
         self.bar = progress_bar(None, "simplify", "fit", False)  # simplify() sets the shown one
         self.frozen = set(full.frozen)
         self.robust, self.scale = full.robust, full.robust_scale or 1.0
@@ -307,13 +285,17 @@ class _Search:
 
     def solve(
         self, model: AbstractModel, rows: dict[str, np.ndarray], step: int = 0, change: str = ""
-    ) -> _Node:
+    ) -> VariantFit:
         """Fit ``model`` on every row (all data, then each fold's training cells); a
         progress line names the search ``step`` and the ``change`` from the parent."""
         key = models.label(model)
         t0, again = time.perf_counter(), key in self.done
         if not again:
-            self.done[key] = self._solve(model, rows)
+            freeze = {n: rows[n][0] for n in self.freeze_names(model) or ()}
+            self.done[key] = fit_variant(
+                model, rows, freeze, self.prep, self.train, self.tol, robust=self.robust,
+                scale=self.scale, criterion=self.criterion, root=self.m.root,
+            )  # fmt: skip
         node = self.done[key]
         crit = "BIC" if self.criterion == "bic" else f"held-out {self.m.name}"
         when = "fitted before" if again else f"{time.perf_counter() - t0:.1f} s"
@@ -325,29 +307,9 @@ class _Search:
         self.bar.update(1)
         return node
 
-    def _solve(self, model: AbstractModel, rows: dict[str, np.ndarray]) -> _Node:
-        freeze = {n: rows[n][0] for n in self.freeze_names(model) or ()}
-        obj = Objective.build(model, freeze, self.robust, self.scale)
-        lay = obj.layout
-        z0 = np.stack([lay.solver_vector({k: v[r] for k, v in rows.items()})
-                       for r in range(self.train.shape[0])])  # fmt: skip
-        lo, hi = (jnp.asarray(b) for b in lay.solver_bounds())
-        z, reason, held, rss, loss = _solve_rows(obj, jnp.asarray(z0), self.prep, self.train,
-                                                 lo, hi, self.tol)  # fmt: skip
-        out = [obj.params(zr) for zr in z]
-        params = {p.name: np.stack([np.asarray(o[p.name]) for o in out]) for p in model.parameters}
-        n, k, rss = 3 * self.prep.n, lay.size + 1, max(float(rss[0]), 1e-300)
-        bic = n * math.log(rss / n) + k * math.log(n)
-        held = np.asarray(held[1:])
-        total = float(held.sum())
-        value = bic if self.criterion == "bic" else math.sqrt(total) if self.m.root else total
-        ok = bool(np.all(np.isfinite(np.asarray(z)))) and math.isfinite(value)
-        ok = ok and not np.any(np.asarray(reason) == int(lm.Reason.NONFINITE))
-        return _Node(model, params, lay.size, float(loss[0]), bic, held, value, ok)
-
     def step(
-        self, node: _Node, best: _Node, step: int
-    ) -> tuple[list[PathRow], _Node | None, _Node]:
+        self, node: VariantFit, best: VariantFit, step: int
+    ) -> tuple[list[PathRow], VariantFit | None, VariantFit]:
         """Fit and score every move from ``node`` and, when several pass, their joint
         move (module docstring): the step's path rows, the variant taken (``None``: none
         passed, the search ends) and the lowest held-out loss fitted so far."""
@@ -377,7 +339,9 @@ class _Search:
         """BIC: the lowest; CV: the simplest accepted, then the lowest held-out loss."""
         return (t[0].value,) if self.criterion == "bic" else (t[0].n_free, t[0].value)
 
-    def accept(self, child: _Node, parent: _Node, best: _Node) -> tuple[bool, float, float]:
+    def accept(
+        self, child: VariantFit, parent: VariantFit, best: VariantFit
+    ) -> tuple[bool, float, float]:
         """(accepted, held-out ratio to ``best``, t of the per-fold log ratios; the two
         NaN for BIC): module docstring."""
         if self.criterion == "bic":
@@ -385,38 +349,11 @@ class _Search:
         keep, ratio, t = feature_test(child.held, best.held, self.n_se, self.min_gain)
         return not keep, ratio, t
 
-    def moves(self, node: _Node):
-        """Every variant one move simpler than ``node`` (:func:`~brdffit.selection.variants.moves`)."""
+    def moves(self, node: VariantFit):
+        """Every variant one move simpler than ``node``
+        (:func:`~brdffit.selection.variants.moves`)."""
         return moves(node.model, node.rows, self.frozen, self._start_cost)
 
     def _start_cost(self, model: AbstractModel, rows: dict[str, np.ndarray]) -> float:
         """The all-data cost of ``model`` at its start ``rows`` (row 0)."""
-        obj = Objective.build(model)
-        z = obj.layout.solver_vector({k: v[0] for k, v in rows.items()})
-        return float(_cost(obj, jnp.asarray(z), self.prep))
-
-
-@eqx.filter_jit
-def _cost(obj: Objective, z, prep):
-    return obj.cost(z, prep)
-
-
-@eqx.filter_jit
-def _solve_rows(obj: Objective, z0, prep: metrics.Prepared, train, lo, hi, tol):
-    """One LM descent per row of ``z0`` on the cells ``train`` marks (one compile per
-    variant); per row: answer, stop reason, held-out weighted sum, RSS and loss on all."""
-
-    def one(args):
-        z, mask = args
-        p = dataclasses.replace(prep, weight=prep.weight * mask[:, None])
-        lin = starts.linear_start(obj, z, p)
-        z = jnp.where(obj.cost(lin, p) < obj.cost(z, p), lin, z)
-        d = lm.solve(obj, z, p, lo, hi, tol)
-        f = obj.model.evaluate(obj.params(d.z), prep.g)
-        e = metrics.differences(f, prep)
-        e = jnp.where(prep.l1, jnp.abs(e), e * e)
-        held = jnp.sum(prep.weight * (1.0 - mask)[:, None] * e)
-        r = metrics.residuals(f, prep)
-        return d.z, d.reason, held, jnp.sum(r * r), metrics.loss(f, prep)
-
-    return lax.map(one, (z0, train), batch_size=lm.batch_size())
+        return start_cost(model, rows, self.prep)

@@ -19,7 +19,11 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
+from brdffit import models
+from brdffit.core.result import nan_to_none
 from brdffit.errors import SweepError
+from brdffit.selection.simplify import simplify
+from brdffit.selection.variants import features
 from brdffit.util.text_table import render
 
 
@@ -29,9 +33,6 @@ def sweep_reduction(model, data, metric: str, fitted, settings: Mapping[str, obj
     sweep's ``settings`` (``simplify``: the criterion; ``cut_deg``, ``seed``,
     ``max_steps``, ``screen``, ``n_restarts``). A fit whose loss is not finite is not
     reduced: the record then says so under ``"skipped"``. JSON-safe (NaN as null)."""
-    from brdffit.core.result import nan_to_none
-    from brdffit.selection.simplify import simplify
-
     criterion = str(settings["simplify"])
     if not math.isfinite(fitted.loss):
         return {"criterion": criterion, "skipped": "the full model's fit has no finite loss"}
@@ -89,7 +90,7 @@ def load_survival(sweep_dir: str | os.PathLike[str]) -> list[Survival]:
         try:
             d = json.loads(p.read_text())
         except (OSError, ValueError):
-            continue  # listed by the report as unreadable (crossrank.load_sweep)
+            continue  # listed by the report as unreadable (sweep_results.load_sweep)
         red = d.get("simplify") if isinstance(d, dict) else None
         if not isinstance(red, dict):
             continue
@@ -140,9 +141,6 @@ def survival_table(sweep_dir: str | os.PathLike[str], fmt: str = "markdown") -> 
 def _feature_counts(rows: list[Survival], fmt: str) -> str:
     """Per start model and metric: each feature of the start, and in how many of the
     reduced materials the chosen variant keeps it."""
-    from brdffit import models
-    from brdffit.selection.variants import features
-
     body = []
     for start, metric in dict.fromkeys((r.start, r.metric) for r in rows):
         mine = [r for r in rows if (r.start, r.metric) == (start, metric) and not r.note]

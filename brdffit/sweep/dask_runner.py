@@ -13,12 +13,13 @@ processes, as JAX is not fork-safe), and closes it after the jobs. With an addre
 (``tcp://host:8786``, e.g. a cluster that ``dask-jobqueue`` started on SLURM or PBS),
 it connects to that scheduler and leaves the cluster running. Every worker turns on
 brdffit's persistent compilation cache (:func:`brdffit.enable_compilation_cache`) when
-it starts.
+it starts (:class:`brdffit.sweep.dask_plugin.CompileCache`).
 """
 
 from __future__ import annotations
 
 import logging
+import socket
 from collections.abc import Callable, Sequence
 from typing import TypeVar
 
@@ -31,7 +32,7 @@ R = TypeVar("R")
 def _client(scheduler: str | None, workers: int, dashboard: str | None, timeout: float):
     """A Dask client and the LocalCluster it owns (``None`` for a named scheduler)."""
     try:
-        from dask.distributed import Client, LocalCluster
+        from dask.distributed import Client, LocalCluster  # deferred: optional, heavy
     except ImportError as e:
         raise MissingDependencyError(
             f"running jobs on Dask needs dask[distributed] ({e}): pip install 'dask[distributed]'"
@@ -59,31 +60,12 @@ def _free_port_or_any(address: str | None) -> str | None:
     a second sweep on one machine gets its own dashboard instead of Dask's warning)."""
     if not address or not address.startswith(":"):
         return address
-    import socket
-
     with socket.socket() as s:
         try:
             s.bind(("", int(address[1:])))
         except OSError:
             return ":0"
     return address
-
-
-try:  # the plugin must be a module-level class: Dask pickles it to every worker
-    from distributed.diagnostics.plugin import WorkerPlugin
-except ImportError:  # reported by _client when a job is run
-    WorkerPlugin = object
-
-
-class CompileCache(WorkerPlugin):
-    """Turns on brdffit's persistent compilation cache in every worker it starts."""
-
-    name = "brdffit-compile-cache"
-
-    def setup(self, worker) -> None:  # noqa: ARG002 (Dask's signature)
-        from brdffit.util.jax_config import enable_compilation_cache
-
-        enable_compilation_cache()
 
 
 def run_on_dask(
@@ -101,8 +83,9 @@ def run_on_dask(
     """``record(job, work(job))`` for every job, as each finishes, on Dask.
 
     Arguments:
-    - ``jobs``, ``work``, ``record``, ``crashed``: as :func:`benchmarks.jobs.run_jobs` (the benchmarks' runner);
-      ``work`` runs on the workers (a picklable function), ``record`` here.
+    - ``jobs``, ``work``, ``record``, ``crashed``: as :func:`benchmarks.jobs.run_jobs` (the
+      benchmarks' runner); ``work`` runs on the workers (a picklable function), ``record``
+      here.
     - ``scheduler``: a Dask scheduler address, or ``None`` for a LocalCluster of
       ``workers`` processes (module docstring).
     - ``dashboard``: the LocalCluster's dashboard address (``":0"`` any free port, ``None``
@@ -115,7 +98,9 @@ def run_on_dask(
     """
     if not jobs:
         return
-    from dask.distributed import as_completed
+    from dask.distributed import as_completed  # deferred: optional, heavy
+
+    from brdffit.sweep.dask_plugin import CompileCache  # deferred: imports distributed
 
     client, cluster = _client(scheduler, workers, dashboard, connect_timeout)
     try:

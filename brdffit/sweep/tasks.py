@@ -1,11 +1,11 @@
-"""A sweep's unit of work: its materials and tasks, and the fit a worker runs for them.
+"""A sweep's unit of work: its tasks, and the fit a worker runs for them.
 
 A :class:`Task` is one (material, model, metric) fit; :func:`fit_task` (or
 :func:`fit_chunk`, several materials of one model and metric in one
 :func:`brdffit.fit_many` call) runs where Dask puts it and returns what to write, and
-:func:`write_outcome` writes it in the client (:mod:`brdffit.sweep`), so a worker needs
+:func:`write_outcome` writes it in the client (:mod:`brdffit.sweep.run`), so a worker needs
 the material's file but no file system in common with the client. Times are measured
-in the worker the same way for every model (:mod:`brdffit.sweep`'s docstring).
+in the worker the same way for every model (:mod:`brdffit.sweep.run`'s docstring).
 """
 
 from __future__ import annotations
@@ -14,31 +14,22 @@ import dataclasses
 import functools
 import json
 import os
+import subprocess
 import traceback
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import jax
 import numpy as np
 
+from brdffit import models
+from brdffit.engine.fit import fit, fit_many
 from brdffit.engine.timing import eval_ns_per_sample
+from brdffit.selection.survival import sweep_reduction
+from brdffit.sweep.materials import Material, load_material
 from brdffit.util.atomic import write_json
 from brdffit.util.version import __version__
-
-
-@dataclass(frozen=True)
-class Material:
-    """One material of a sweep.
-
-    ``kind`` is ``"merl"``, ``"nbrdf"``, ``"rgl"``, ``"table"`` (``path`` the file) or
-    ``"synthetic"`` (``spec``: generating model, parameters, noise and seed).
-    """
-
-    name: str
-    family: str
-    kind: str
-    path: str | None = None
-    spec: dict | None = None
 
 
 def file_stem(label: str) -> str:
@@ -68,26 +59,6 @@ class Task:
         return Path(out) / self.material.name / f"{file_stem(self.model)}__{self.metric}.json"
 
 
-def load_material(material: Material, stride: tuple[int, int, int]):
-    """The :class:`Measurements` of ``material`` on the MERL grid of ``stride``."""
-    if material.kind == "synthetic":
-        from brdffit import models
-        from brdffit.io.synthetic import synthesize
-
-        s = material.spec
-        return synthesize(
-            models.get(s["model"]),
-            s["params"],
-            stride=stride,
-            noise_mult=s["noise_mult"],
-            seed=s["seed"],
-            source=f"synthetic {material.name} ({s['model']})",
-        )
-    from brdffit.io.load import load_measurements
-
-    return load_measurements(material.path, stride=1 if material.kind == "table" else stride)
-
-
 _CACHE: dict = {}
 
 
@@ -103,7 +74,6 @@ def checkout_commit(package_dir: Path) -> str | None:
     """``git describe --always --dirty`` of the checkout whose top level holds
     ``package_dir`` as ``<top>/<package name>``; ``None`` when there is none (an
     installed copy, possibly inside some other repository, which it must not report)."""
-    import subprocess
 
     def git(*args: str) -> str:
         return subprocess.run(
@@ -129,8 +99,6 @@ def provenance() -> dict:
     :func:`checkout_commit` of the package, else ``$BRDFFIT_GIT_DESCRIBE`` (set by
     whoever installed a copy), else ``None``.
     """
-    import jax
-
     here = Path(__file__).resolve().parents[1]  # the brdffit package folder
     commit = checkout_commit(here) or os.environ.get("BRDFFIT_GIT_DESCRIBE") or None
     return {
@@ -162,9 +130,6 @@ def fit_task(task: Task) -> dict:
     on), ``{"ok": False, "status", "error_record"}``.
     """
     try:
-        from brdffit import models
-        from brdffit.engine.fit import fit
-
         data = _cached_data(task.material, tuple(task.settings["stride"]))
         model = models.from_spec(task.model)
         r = fit(model, data, task.metric, **_fit_options(task.settings), throw=False)
@@ -184,9 +149,6 @@ def fit_chunk(chunk: Sequence[Task]) -> list[dict]:
     if len(chunk) == 1:
         return [fit_task(chunk[0])]
     try:
-        from brdffit import models
-        from brdffit.engine.fit import fit_many
-
         first = chunk[0]
         stride = tuple(first.settings["stride"])
         datasets = [load_material(t.material, stride) for t in chunk]
@@ -228,8 +190,6 @@ def _outcome(task: Task, model, data, r, batch: int = 1) -> dict:
         provenance=provenance(),
     )
     if s.get("simplify"):  # brdffit sweep --simplify: the reduction after the fit
-        from brdffit.selection.survival import sweep_reduction
-
         d["simplify"] = sweep_reduction(model, data, task.metric, r, s)
     status = {"ok": True, "converged": r.converged, "task": task.path(Path(".")).name}
     return {"ok": True, "status": status, "result": d}

@@ -2,7 +2,8 @@
 
 The file tabulates ``albedo / pi`` (:func:`tests.rgl_fixture.lambert_file`); ``lambert``
 fitted to it and exported to Mitsuba (``diffuse``) must render like Mitsuba's ``measured``
-plugin on the file, and a material 10% too dark must be caught.
+plugin on the file, and a material 10% too dark must be caught. The benchmark's run goes
+on past an unreadable file and reports it.
 """
 
 from pathlib import Path
@@ -11,7 +12,7 @@ import numpy as np
 import pytest
 
 import brdffit
-from benchmarks.render_check import render_check, sphere_mask
+from benchmarks.render_check import main, render_check, sphere_mask
 from brdffit import models
 from tests.rgl_fixture import lambert_file
 
@@ -46,3 +47,17 @@ def test_lambert_fit_renders_like_the_measured_file(tmp_path: Path):
     # Environment: per-pixel noise of the measured plugin's uniform sampling dominates;
     # the export must not add more than the noise between two seeds of the file itself.
     assert fit["env"]["rel_rmse"] < check["noise"]["env"]
+
+
+def test_unreadable_file_is_a_failed_row_and_the_run_goes_on(tmp_path: Path):
+    """Garbage bytes named ``.bsdf`` stopped the whole run with no report written."""
+    bad = tmp_path / "x.bsdf"
+    bad.write_bytes(b"not a tensor file" * 8)
+    good = lambert_file(tmp_path / "lambert.bsdf", ALBEDO, n=9)
+    out = tmp_path / "report.md"
+    # low_e2 at this stride: the fit the test above compiled is reused
+    argv = [str(bad), str(good), "--models", "lambert", "--metric", "low_e2"]
+    main([*argv, "--stride", "9", "9", "15", "--res", "8", "--spp", "4", "--out", str(out)])
+    rows = {line.split(" | ")[0]: line for line in out.read_text().splitlines() if " | " in line}
+    assert "| not read |" in rows["| x"] and "failed: MeasurementFileError: " in rows["| x"]
+    assert "| lambert -> diffuse |" in rows["| lambert"]  # fitted and rendered

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from brdffit import models, synthesize, write_merl
-from brdffit.cli.commands import main
+from brdffit.cli import main
 
 TRUTH = {"kd": [0.1, 0.2, 0.3], "f0": [0.9, 0.6, 0.3], "alpha": 0.15}
 SMALL = ["--stride", "9", "9", "9"]

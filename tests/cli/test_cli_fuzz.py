@@ -11,7 +11,7 @@ from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
 from brdffit import models, synthesize
-from brdffit.cli.commands import main
+from brdffit.cli import main
 
 FUZZ = settings(
     max_examples=60,

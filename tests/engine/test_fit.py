@@ -11,10 +11,11 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from brdffit import FitError, FitResult, Status, models, synthesize
+from brdffit import FitError, FitResult, Status, fit, models, synthesize
 from brdffit.core.measurements import Measurements
-from brdffit.engine import fit
-from brdffit.engine.metrics import get_metric, prepare
+from brdffit.engine.batch import _subset, coarse_size
+from brdffit.engine.fit import require_measurements
+from brdffit.engine.metrics import get_metric, prepare, prepare_all
 from brdffit.engine.objective import Objective
 from brdffit.errors import ParameterError
 from tests.cases import CASES
@@ -243,8 +244,6 @@ def test_a_fit_with_every_parameter_frozen_evaluates_and_reports():
 
 def test_fit_refuses_what_is_not_measurements_and_names_the_nbrdf_reader():
     # fit's own check (the test suite's type-check hook would stop the call first)
-    from brdffit.engine.fit import require_measurements
-
     class NBRDF:  # stands for the network read_nbrdf returns
         pass
 
@@ -258,9 +257,6 @@ def test_fit_refuses_what_is_not_measurements_and_names_the_nbrdf_reader():
 def test_thinned_starts_keep_each_metrics_own_values():
     """A log metric leaves out a signed value below ln(1 + x)'s domain that a linear
     metric fits; thinning one metric's data like the other's must keep its own values."""
-    from brdffit.engine.fit import _subset
-    from brdffit.engine.metrics import prepare_all
-
     data = synthesize(models.get("lambert"), {"kd": 0.5}, stride=9)
     values = np.array(data.values)
     values[np.flatnonzero(data.valid)[::7], 1] = -3.0  # f cos far below -1
@@ -290,8 +286,6 @@ def test_thinned_starts_keep_each_metrics_own_values():
     ],
 )
 def test_the_starts_thin_mid_sized_data_to_a_quarter(n, coarse, want):
-    from brdffit.engine.fit import coarse_size
-
     assert coarse_size(n, coarse) == want
 
 

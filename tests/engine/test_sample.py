@@ -7,9 +7,8 @@ import warnings
 import numpy as np
 import pytest
 
-from brdffit import ChainTooShortError, models, synthesize
-from brdffit.engine import fit, sample
-from brdffit.engine.sample import ChainTooShortWarning, PosteriorAtBoundWarning
+from brdffit import ChainTooShortError, fit, models, sample, synthesize
+from brdffit.engine.posterior import ChainTooShortWarning, PosteriorAtBoundWarning
 from brdffit.errors import ParameterError
 
 TRUTH = {"kd": [0.1, 0.2, 0.3], "f0": [0.9, 0.6, 0.3], "alpha": 0.15}

@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 from brdffit import models, synthesize, write_merl
-from brdffit.cli.commands import main
+from brdffit.cli import main
 from brdffit.core.result import FitResult
 from brdffit.export import (
     EXACT_TOL,

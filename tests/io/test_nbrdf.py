@@ -17,7 +17,8 @@ import pytest
 
 from brdffit.core.geometry import MERL_SHAPE, halfdiff_to_io
 from brdffit.errors import MeasurementFileError
-from brdffit.io.merl import merl_grid, read_merl
+from brdffit.io.merl import read_merl
+from brdffit.io.merl_grid import merl_grid
 from brdffit.io.nbrdf import NBRDF, nbrdf_to_merl, read_nbrdf
 
 h5py = pytest.importorskip("h5py")

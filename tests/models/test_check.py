@@ -9,7 +9,7 @@ import jax.numpy as jnp
 import pytest
 
 from brdffit import models
-from brdffit.cli.commands import main
+from brdffit.cli import main
 from brdffit.core.abstract_model import AbstractModel
 from brdffit.core.geometry import ShadingGeometry
 from brdffit.core.parameters import Parameter, Params

@@ -19,8 +19,8 @@ import itertools
 import numpy as np
 import pytest
 
+from brdffit import fit
 from brdffit.core.measurements import Measurements
-from brdffit.engine import fit
 from tests.cases import CASES
 from tests.helpers import random_pairs
 

@@ -9,9 +9,8 @@ import numpy as np
 import pytest
 from scipy import integrate
 
-from brdffit import models
+from brdffit import fit, models
 from brdffit.core.measurements import Measurements
-from brdffit.engine import fit
 from brdffit.models import low
 from tests.helpers import hemisphere_integral, random_pairs
 

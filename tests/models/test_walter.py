@@ -23,9 +23,8 @@ import numpy as np
 import pytest
 from scipy import integrate, special
 
-from brdffit import models
+from brdffit import fit, models
 from brdffit.core.geometry import uniform_hemisphere
-from brdffit.engine import fit
 from brdffit.io.synthetic import synthesize
 from brdffit.models import _terms
 from tests.helpers import hemisphere_integral

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from brdffit import FitResult, models, synthesize
-from brdffit.cli.commands import main
+from brdffit.cli import main
 from brdffit.io.merl import MERL_SCALES
 from brdffit.report.html import write_fit_html, write_sweep_html
 from tests.sweep_fixtures import make_sweep

@@ -8,7 +8,7 @@ import shutil
 
 import pytest
 
-from brdffit.cli.commands import main
+from brdffit.cli import main
 from brdffit.report.markdown import write_report
 from tests.sweep_fixtures import TABLE, make_sweep
 
@@ -82,3 +82,36 @@ def test_report_counts_a_shared_first_place_for_each_model(tmp_path):
     assert re.search(r"\| a \| 1\.50 \[[^|]*\| 3 \[", text), text
     assert re.search(r"\| b \| 1\.50 \[[^|]*\| 3 \[", text), text
     assert re.search(r"\| c \| 3\.00 \[[^|]*\| 0 \[", text), text
+
+
+def _only_result_unreadable(root):
+    """A sweep folder of one task whose result file is truncated (issue 39, item 6)."""
+    root = make_sweep(root, table={"steel": {"a": (0.5, 0.4, 10.0, True)}})
+    (path,) = root.glob("*/*.json")
+    path.write_text(path.read_text()[:40])
+    return root, path
+
+
+def test_report_on_a_folder_with_nothing_readable_exits_2_in_one_line(tmp_path, capsys):
+    root, path = _only_result_unreadable(tmp_path / "sw")
+    assert main(["report", str(root)]) == 2
+    out, err = capsys.readouterr()
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and out == ""
+    assert str(root) in lines[0] and "no result file could be read" in lines[0]
+    assert path.name in lines[0]
+
+
+def test_report_with_too_few_results_for_a_figure_says_so(tmp_path, capsys):
+    root, path = _only_result_unreadable(tmp_path / "sw")
+    error = {"material": "steel", "model": "a", "metric": "low_e2", "error": "FitError"}
+    (root / "steel" / "a__low_e2.error.json").write_text(json.dumps(error))
+    assert main(["report", str(root)]) == 0
+    assert path.name in capsys.readouterr().err  # listed as left out
+    text = (root / "report" / "report.md").read_text()
+    assert "No rank matrix: no model has a finite low_e2." in text
+    assert "No Pareto plot: no model has a finite median error" in text
+    assert "| steel | a | low_e2 | FitError:  |" in text
+    assert not list((root / "report").glob("*.png"))
+    page = (root / "report.html").read_text()
+    assert "No rank matrix" in page and "No Pareto plot" in page

@@ -6,18 +6,18 @@ import numpy as np
 import pytest
 
 from brdffit.errors import SweepError
+from brdffit.report.selection_figures import pareto_figure, rank_matrix_figure
 from brdffit.selection.crossrank import (
     aggregate,
     aggregate_table,
     family_table,
-    load_sweep,
     material_order,
     matrices,
     per_material_table,
-    rank_matrix_figure,
 )
 from brdffit.selection.families import family_of
-from brdffit.selection.pareto import error_vs_time, pareto_figure, pareto_front, pareto_table
+from brdffit.selection.pareto import error_vs_time, pareto_front, pareto_table
+from brdffit.selection.sweep_results import load_sweep
 from tests.sweep_fixtures import TABLE, make_sweep
 
 

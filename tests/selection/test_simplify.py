@@ -16,18 +16,17 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from brdffit import ParameterError, Reduction, models, synthesize
-from brdffit.cli.commands import main
+from brdffit import ParameterError, Reduction, models, simplify, synthesize
+from brdffit.cli import main
 from brdffit.engine import metrics
 from brdffit.engine.uncertainty import block_cells, block_index
 from brdffit.errors import SweepError
 from brdffit.models._restrict import Restricted, make_neutral
 from brdffit.report.html import write_sweep_html
 from brdffit.report.markdown import write_report
-from brdffit.selection import simplify
 from brdffit.selection.folds import deal_blocks, fold_t, keep_threshold, sign_count
 from brdffit.selection.survival import has_reduction, survival_table
-from brdffit.sweep.run import run_sweep, synthetic_materials
+from brdffit.sweep import run_sweep, synthetic_materials
 from tests.helpers import random_pairs
 
 STRIDE = (5, 5, 9)

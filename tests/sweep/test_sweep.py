@@ -20,10 +20,12 @@ from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 from brdffit import models
-from brdffit.cli.commands import main
+from brdffit.cli import main
 from brdffit.errors import ParameterError, SweepError
-from brdffit.selection.crossrank import load_sweep, matrices
-from brdffit.sweep.run import Material, checkout_commit, file_stem, run_sweep, synthetic_materials
+from brdffit.selection.crossrank import matrices
+from brdffit.selection.sweep_results import load_sweep
+from brdffit.sweep import Material, run_sweep, synthetic_materials
+from brdffit.sweep.tasks import checkout_commit, file_stem
 
 ROOT = Path(__file__).resolve().parents[2]
 ARGS = dict(stride=(15, 15, 15), n_restarts=0, eval_n=4096)
@@ -40,7 +42,7 @@ def test_killed_sweep_resumes_without_redoing_work(tmp_path):
     # test_cluster's; a LocalCluster here only added two workers' start and compilation.
     # Lambert: the cheapest model to compile (walter took 49 s here, nearly all of it
     # compiling twice); each fit still writes its JSON and times its evaluation
-    cmd = [sys.executable, "-m", "brdffit.cli.commands", "sweep", str(out), "--synthetic", "6"]
+    cmd = [sys.executable, "-m", "brdffit.cli", "sweep", str(out), "--synthetic", "6"]
     cmd += ["--models", "lambert", "--metrics", "low_e2", "--stride", "15", "15", "15"]
     cmd += ["--restarts", "0", "--jobs", "1", "--no-progress"]
     # eval_n is not a CLI option; the in-process resume below must match the default
@@ -257,7 +259,7 @@ def test_a_variant_is_fitted_resumed_and_ranked_as_its_own_model(tmp_path):
 
 
 def test_sweep_cli_splits_models_outside_brackets(tmp_path, monkeypatch, capsys):
-    import brdffit.sweep.run as sweep
+    import brdffit.sweep as sweep
 
     seen = {}
 
@@ -289,7 +291,8 @@ def test_checkout_commit_reports_only_the_packages_own_checkout(tmp_path):
     assert checkout_commit(tmp_path / "brdffit") == own + "-dirty"
 
 
-@pytest.mark.slow  # 38-43 s; the engine's own worker-loss test (tests/sweep/test_dask_runner.py) is fast
+# 38-43 s; the engine's own worker-loss test (tests/sweep/test_dask_runner.py) is fast
+@pytest.mark.slow
 def test_sweep_on_dask_survives_a_killed_worker(tmp_path):
     """A worker process killed while the sweep runs: Dask runs its task again on another
     worker and every result is written once (issue 31)."""
