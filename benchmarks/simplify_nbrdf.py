@@ -33,9 +33,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from brdffit import enable_compilation_cache, models
+from brdffit import enable_compilation_cache, models, simplify  # noqa: E402
 from brdffit.io.load import load_measurements  # noqa: E402
-from brdffit import simplify  # noqa: E402
 from brdffit.selection.families import family_of  # noqa: E402
 
 NBRDF = Path(__file__).resolve().parents[2] / "shared" / "data" / "merl_nbrdf"

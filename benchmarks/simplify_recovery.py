@@ -51,10 +51,9 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from brdffit import enable_compilation_cache, models, synthesize
+from brdffit import enable_compilation_cache, models, simplify, synthesize  # noqa: E402
 from brdffit.io.merl_grid import merl_grid  # noqa: E402
 from brdffit.models._restrict import base_of, restrictions  # noqa: E402
-from brdffit import simplify  # noqa: E402
 from brdffit.selection.variants import features  # noqa: E402
 
 NOISE = 0.03
