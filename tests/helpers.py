@@ -1,10 +1,12 @@
-"""Direction sets and small harness functions shared by several tests."""
+"""Direction sets and small harness functions shared by several tests (a command line
+that must fail cleanly among them)."""
 
 from __future__ import annotations
 
 import jax.numpy as jnp
 import numpy as np
 
+from brdffit.cli import main
 from brdffit.core.geometry import spherical_to_vector, uniform_hemisphere
 from brdffit.models.check import extreme_pairs, params_at_bounds  # noqa: F401  (re-exported)
 
@@ -76,3 +78,17 @@ def half_vector_albedo(evaluate, params, theta_i, scale, n=150):
     wo = 2 * d[:, None] * h - wi
     f = np.asarray(evaluate(params, wi, wo))[:, 0]
     return float(np.sum(np.where(d > 0, f * np.clip(wo[:, 2], 0, None) * 4 * d, 0) * weight))
+
+
+def fails_cleanly(capsys, argv, *needles) -> str:
+    """Run the CLI in-process: exit code 2, one stderr line holding every needle."""
+    try:
+        code = main([str(a) for a in argv])
+    except SystemExit as e:  # argparse's own errors
+        code = e.code
+    out, err = capsys.readouterr()
+    assert code == 2, (code, out, err)
+    assert len(err.strip().splitlines()) == 1, err
+    for needle in needles:
+        assert needle in err, err
+    return err

@@ -2,18 +2,23 @@
 subpackages' ``__all__``), every ``brdffit.x.y`` named in README.md and in the
 notebooks (text and code), every ``from brdffit... import ...`` there, and the console
 command of pyproject.toml's ``[project.scripts]``. A failure lists each missing name
-with where it is named."""
+with where it is named. The readers the README lists return Measurements, and the
+error types are BrdffitErrors."""
 
 from __future__ import annotations
 
 import ast
 import importlib
+import inspect
 import json
 import re
 import tomllib
 from pathlib import Path
 
 import pytest
+
+import brdffit
+from brdffit import BrdffitError, MissingDependencyError
 
 ROOT = Path(__file__).resolve().parents[1]
 README = ROOT / "README.md"
@@ -173,3 +178,23 @@ def test_parser_finds_names():
     ]
     assert _resolve("brdffit.fit") and not _resolve("brdffit.no_such_name")
     assert not _resolve("brdffit.no_such_module.x")
+
+
+def test_readme_names_readers_that_return_measurements():
+    """Each row of the README's Input-files table names readers returning Measurements."""
+    text = README.read_text()
+    table = text.split("## Input files", 1)[1].split("\n\n", 2)[1]
+    rows = [r for r in table.splitlines() if r.startswith("|") and "---" not in r][1:]
+    assert rows
+    for row in rows:
+        names = re.findall(r"`([\w.]+)`", row.split("|")[2])
+        assert names, row
+        for name in names:
+            mod, _, attr = name.rpartition(".")
+            f = getattr(importlib.import_module(mod) if mod else brdffit, attr)
+            ret = inspect.signature(f).return_annotation
+            assert ret in ("Measurements", brdffit.Measurements), (name, ret)
+
+
+def test_errors_are_brdffit_errors():
+    assert issubclass(MissingDependencyError, BrdffitError)

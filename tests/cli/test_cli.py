@@ -1,14 +1,18 @@
-"""The command line: every subcommand once, and bad input as one stderr line with exit 2."""
+"""The command line: every subcommand once, its version, help text for every option,
+progress lines, and bad input as one stderr line with exit 2 (more careless input:
+``test_bad_input.py``)."""
 
 from __future__ import annotations
 
+import argparse
 import json
+import re
 
 import numpy as np
 import pytest
 
-from brdffit import models, synthesize, write_merl
-from brdffit.cli import main
+from brdffit import __version__, models, synthesize, write_merl
+from brdffit.cli import build_parser, main
 
 TRUTH = {"kd": [0.1, 0.2, 0.3], "f0": [0.9, 0.6, 0.3], "alpha": 0.15}
 SMALL = ["--stride", "9", "9", "9"]
@@ -149,7 +153,7 @@ def test_fit_command_works_for_every_model(capsys, merl_file, tmp_path, name):
     assert np.isfinite(d["loss"])
 
 
-@pytest.mark.slow  # 23 s; test_errors_29.py runs `simplify` through the command line fast
+@pytest.mark.slow  # 23 s; test_simplify_prints_progress_per_move runs it fast
 def test_simplify_prints_the_path_and_the_chosen_label(capsys, merl_file, tmp_path):
     # the fixture's kd and f0 are coloured and its diffuse term is on: nothing goes
     js, start = tmp_path / "simplify.json", "walter[specular_weight=false]"
@@ -184,3 +188,69 @@ def test_sample_says_what_it_does_and_shows_each_warning_once(capsys, merl_file)
     warning = next(x for x in lines if needle in x)
     assert warning.startswith("brdffit sample: warning: chain of")
     assert "Warning" not in err and "cli.py" not in err  # no raw Python warning
+
+
+def test_sample_on_noise_free_data_starts_from_a_non_degenerate_ball(capsys, lambert_csv):
+    # emcee refused the start ball ("large condition number"): every LM error was ~0
+    argv = ["sample", lambert_csv, "--model", "lambert", "--steps", "20", "--subsample", "100"]
+    code = main([*map(str, argv), "--no-progress"])
+    out, err = capsys.readouterr()
+    assert code == 0, err
+    assert "[[Posterior]]" in out
+
+
+def test_fit_header_names_the_stride(capsys, tmp_path):
+    path = tmp_path / "g.binary"
+    write_merl(path, synthesize(models.get("lambert"), {"kd": [0.2, 0.2, 0.2]}))
+    assert main(["fit", str(path), "--model", "lambert", "--stride", "15", "15", "15"]) == 0
+    header = capsys.readouterr().out.splitlines()[0]
+    assert "stride (15, 15, 15)" in header, header
+
+
+# --------------------------------------------------------------------------- version and help
+
+
+def test_version(capsys):
+    with pytest.raises(SystemExit) as e:
+        main(["--version"])
+    assert e.value.code == 0
+    assert __version__ in capsys.readouterr().out
+
+
+def test_every_option_has_help_text():
+    parser = build_parser()
+    subs = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    missing = [
+        f"{name} {'/'.join(a.option_strings) or a.dest}"
+        for name, sp in subs.choices.items()
+        for a in sp._actions
+        if not isinstance(a, argparse._HelpAction) and not a.help
+    ]
+    assert not missing, missing
+
+
+# --------------------------------------------------------------------------- progress
+
+
+def test_rank_prints_progress_per_model(capsys, good_csv):
+    # two cheap models (a walter fit here cost 13 s of compilation and showed nothing more)
+    argv = ["rank", good_csv, "--models", "lambert,lambert[grey=kd]"]
+    code = main([str(a) for a in argv])
+    out, err = capsys.readouterr()
+    assert code == 0, err
+    # a finished fit's line (the bar is redrawn around it with carriage returns)
+    done = re.findall(r"rank: (\S+)  \d+\.\d s  low_e2 [\d.e+-]+ \((\w+)\)", err)
+    assert [name for name, _ in done] == ["lambert", "lambert[grey=kd]"], err
+
+
+def test_simplify_prints_progress_per_move(capsys, good_csv, tmp_path):
+    argv = ["simplify", good_csv, "--model", "lambert", "--criterion", "bic"]  # few variants: fast
+    code = main([str(a) for a in [*argv, "--json", tmp_path / "s.json"]])
+    out, err = capsys.readouterr()
+    assert code == 0, err
+    lines = re.findall(r"simplify: step (\d+)  ([^\n]+?)  k=\d+  low_e2 ", err)
+    assert lines[0] == ("0", "start"), err
+    assert ("1", "grey kd") in lines, err  # every move of a step gets its line
+    path = json.loads((tmp_path / "s.json").read_text())["path"]
+    taken = {r["change"] for r in path if r["decision"] in ("removed", "chosen")}
+    assert not [r for r in path if r["decision"] == "kept" and r["change"] in taken]

@@ -12,9 +12,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from brdffit.core.measurements import Measurements
+from brdffit import Measurements, MeasurementsError
 from brdffit.engine import metrics
-from brdffit.errors import MeasurementsError
 
 
 def _dirs(n: int, seed: int) -> tuple[np.ndarray, np.ndarray]:

@@ -12,13 +12,11 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from brdffit import fit_many, models
-from brdffit.core.measurements import Measurements
+from brdffit import Measurements, ParameterError, fit_many, models
 from brdffit.core.result import BLOCK_DEG
 from brdffit.engine.metrics import get_metric, keep_mask, prepare
 from brdffit.engine.objective import Objective, block_moments, natural_moments
 from brdffit.engine.uncertainty import block_covariance, block_index
-from brdffit.errors import ParameterError
 from tests.helpers import random_pairs
 
 WI, WO = random_pairs(11, 4000)

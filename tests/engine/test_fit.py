@@ -11,13 +11,20 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from brdffit import FitError, FitResult, Status, fit, models, synthesize
-from brdffit.core.measurements import Measurements
+from brdffit import (
+    FitError,
+    FitResult,
+    Measurements,
+    ParameterError,
+    Status,
+    fit,
+    models,
+    synthesize,
+)
 from brdffit.engine.batch import _subset, coarse_size
 from brdffit.engine.fit import require_measurements
 from brdffit.engine.metrics import get_metric, prepare, prepare_all
 from brdffit.engine.objective import Objective
-from brdffit.errors import ParameterError
 from tests.cases import CASES
 
 TRUTH = {"kd": [0.1, 0.2, 0.3], "ks": [0.8, 0.7, 0.9], "f0": [0.9, 0.6, 0.3], "alpha": 0.15}

@@ -5,8 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from brdffit import fit, fit_many, models, synthesize
-from brdffit.errors import ParameterError
+from brdffit import ParameterError, fit, fit_many, models, synthesize
 
 GRID = (9, 9, 9)  # 2,000 MERL bin centres: small enough for several fits per test
 

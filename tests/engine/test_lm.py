@@ -19,8 +19,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.optimize import least_squares
 
-from brdffit import models, synthesize
-from brdffit.core.measurements import Measurements
+from brdffit import Measurements, models, synthesize
 from brdffit.engine import lm, metrics
 from brdffit.engine.objective import Objective, plain_residuals
 

@@ -8,7 +8,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from brdffit.core.measurements import Measurements
+from brdffit import Measurements
 from brdffit.engine import metrics
 from tests.helpers import random_pairs
 

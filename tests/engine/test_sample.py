@@ -7,9 +7,8 @@ import warnings
 import numpy as np
 import pytest
 
-from brdffit import ChainTooShortError, fit, models, sample, synthesize
+from brdffit import ChainTooShortError, ParameterError, fit, models, sample, synthesize
 from brdffit.engine.posterior import ChainTooShortWarning, PosteriorAtBoundWarning
-from brdffit.errors import ParameterError
 
 TRUTH = {"kd": [0.1, 0.2, 0.3], "f0": [0.9, 0.6, 0.3], "alpha": 0.15}
 
@@ -151,6 +150,14 @@ def test_corner_plot_and_bad_arguments():
         sample(m, data, noise="weird")
     with pytest.raises(ParameterError, match="not free parameters"):
         sample(m, data, priors={"alpha": lambda x: 0.0})
+
+
+def test_sample_library_names_the_argument():
+    data = synthesize(models.get("lambert"), {"kd": [0.2, 0.2, 0.2]}, stride=(15, 15, 15))
+    with pytest.raises(ParameterError, match="n_steps"):
+        sample(models.get("lambert"), data, n_steps=0, progress=False)
+    with pytest.raises(ParameterError, match="n_walkers"):
+        sample(models.get("lambert"), data, n_walkers=1, progress=False)
 
 
 @pytest.mark.parametrize(

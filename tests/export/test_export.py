@@ -17,9 +17,8 @@ import xml.etree.ElementTree as ET
 import numpy as np
 import pytest
 
-from brdffit import models, synthesize, write_merl
+from brdffit import FitResult, models, synthesize, write_merl
 from brdffit.cli import main
-from brdffit.core.result import FitResult
 from brdffit.export import (
     EXACT_TOL,
     ExportError,

@@ -26,9 +26,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from brdffit import models
-from brdffit.errors import ExportValueError
 from brdffit.export import (
     EXACT_TOL,
+    ExportValueError,
     check_targets,
     error_directions,
     evaluate_model,

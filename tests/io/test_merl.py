@@ -1,4 +1,5 @@
-"""The MERL binary format: exact reading and writing, bad files."""
+"""The MERL binary format: exact reading and writing, masked cells counted by reason (in
+``brdffit info`` too), bad files."""
 
 from __future__ import annotations
 
@@ -9,9 +10,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from brdffit import MeasurementFileError, MeasurementsError, read_merl, write_merl
+from brdffit.cli import main
 from brdffit.core.geometry import MERL_SHAPE
-from brdffit.errors import MeasurementFileError, MeasurementsError
-from brdffit.io.merl import MERL_FILE_BYTES, MERL_SCALES, read_merl, write_merl
+from brdffit.io.merl import MERL_FILE_BYTES, MERL_SCALES
 from brdffit.io.merl_grid import MERL_N_CELLS, merl_grid, merl_grid_measurements, merl_subgrid
 
 N = MERL_N_CELLS
@@ -81,6 +83,41 @@ def test_one_negative_channel_masks_that_channel_only(table):
     )
     assert counts.no_channel == int((g.above & (_raw() < 0).all(axis=0)).sum())
     assert "channels masked inside the cut: R " in counts.text()
+
+
+def test_info_says_how_many_cells_are_masked_and_why(tmp_path, capsys):
+    # a MERL file written by hand: 30% of the cells with a negative blue channel, 10%
+    # with every channel negative (MERL's "not measured")
+    rng = np.random.default_rng(0)
+    shape = (90, 90, 180)
+    raw = np.ones((3, *shape))
+    one = rng.random(shape) < 0.3
+    every = (rng.random(shape) < 0.1) & ~one
+    raw[2][one] = -0.5
+    raw[:, every] = -1.0
+    path = tmp_path / "bad-blue.binary"
+    path.write_bytes(np.asarray(shape, "<i4").tobytes() + raw.astype("<f8").tobytes())
+    # the horizon from DESIGN.md's closed form at the bin centres, not from brdffit
+    th = ((np.arange(90) + 0.5) / 90) ** 2 * np.pi / 2
+    td = (np.arange(90) + 0.5) / 90 * np.pi / 2
+    pd = (np.arange(180) + 0.5) / 180 * np.pi
+    th, td, pd = np.meshgrid(th, td, pd, indexing="ij")
+    a, b = np.cos(td) * np.cos(th), np.sin(td) * np.cos(pd) * np.sin(th)
+    below = ~((a - b > 0) & (a + b > 0))
+    n_below, n_every, n_one = (int(m.sum()) for m in (below, every & ~below, one & ~below))
+    assert 0.2 < n_below / below.size < 0.3  # about 24% by geometry alone (DESIGN.md)
+    code = main(["info", str(path)])
+    out, _ = capsys.readouterr()
+    assert code == 0
+    line = next(x for x in out.splitlines() if x.startswith("masked"))
+    total = n_below + n_every
+    # a cell with only its blue negative keeps red and green in the fit (issue 28)
+    neg = n_every + n_one
+    assert line.split(None, 1)[1] == (
+        f"{total:,} of 1,458,000 samples: {n_below:,} below the horizon, {n_every:,} with no "
+        f"channel measured; channels masked inside the cut: R {n_every:,} negative (not "
+        f"measured), G {n_every:,} negative (not measured), B {neg:,} negative (not measured)"
+    )
 
 
 # --------------------------------------------------------------------------- writing

@@ -9,6 +9,7 @@ import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
+from brdffit import MeasurementsError, ParameterError
 from brdffit.core.geometry import (
     MERL_SHAPE,
     halfdiff_to_io,
@@ -16,7 +17,6 @@ from brdffit.core.geometry import (
     merl_solid_angle_weights,
     spherical_to_vector,
 )
-from brdffit.errors import MeasurementsError, ParameterError
 from brdffit.io.merl_grid import (
     MERL_N_CELLS,
     lookup,

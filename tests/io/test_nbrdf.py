@@ -15,11 +15,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from brdffit import MeasurementFileError, MissingDependencyError, read_merl, read_nbrdf
 from brdffit.core.geometry import MERL_SHAPE, halfdiff_to_io
-from brdffit.errors import MeasurementFileError
-from brdffit.io.merl import read_merl
 from brdffit.io.merl_grid import merl_grid
-from brdffit.io.nbrdf import NBRDF, nbrdf_to_merl, read_nbrdf
+from brdffit.io.nbrdf import NBRDF, nbrdf_to_merl
+from tests.helpers import fails_cleanly
 
 h5py = pytest.importorskip("h5py")
 
@@ -162,6 +162,14 @@ def test_missing_h5py_names_the_extra(synthetic, monkeypatch):
     monkeypatch.setitem(sys.modules, "h5py", None)
     with pytest.raises(ImportError, match=r"pip install brdffit\[nbrdf\]"):
         read_nbrdf(synthetic[0])
+
+
+def test_nbrdf_without_h5py_raises_missing_dependency(tmp_path, monkeypatch, capsys):
+    stem = _write_keras(tmp_path / "toy", _random_weights(), _architecture())
+    monkeypatch.setitem(sys.modules, "h5py", None)
+    with pytest.raises(MissingDependencyError, match=r"brdffit\[nbrdf\]"):
+        read_nbrdf(stem)
+    fails_cleanly(capsys, ["info", stem.with_suffix(".json")], "h5py")
 
 
 def _corrupt(stem: Path, case: str) -> Path:

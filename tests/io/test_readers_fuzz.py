@@ -13,12 +13,17 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from brdffit import models, synthesize, write_merl
-from brdffit.core.measurements import Measurements
-from brdffit.errors import BrdffitError
-from brdffit.io.merl import read_merl
+from brdffit import (
+    BrdffitError,
+    Measurements,
+    models,
+    read_merl,
+    read_nbrdf,
+    read_table,
+    synthesize,
+    write_merl,
+)
 from brdffit.io.rgl_header import rgl_header
-from brdffit.io.table import read_table
 
 FUZZ = settings(
     max_examples=25,
@@ -207,12 +212,6 @@ def nbrdf_seed(tmp_path_factory) -> Path:
     )  # fmt: skip
 
 
-def _nbrdf(stem: Path):
-    from brdffit.io.nbrdf import read_nbrdf
-
-    return read_nbrdf(stem)
-
-
 @FUZZ
 @given(edits=EDITS, cut=CUTS, which=st.sampled_from([".json", ".h5"]))
 def test_mutated_nbrdf(tmp_path, nbrdf_seed, edits, cut, which):
@@ -221,7 +220,7 @@ def test_mutated_nbrdf(tmp_path, nbrdf_seed, edits, cut, which):
         shutil.copy(nbrdf_seed.with_suffix(suffix), stem.with_suffix(suffix))
     target = stem.with_suffix(which)
     target.write_bytes(_mutate(target.read_bytes(), edits, cut))
-    _read_or_refuse(_nbrdf, stem)
+    _read_or_refuse(read_nbrdf, stem)
 
 
 @FUZZ
@@ -243,4 +242,4 @@ def test_random_json_architecture(tmp_path, nbrdf_seed, doc):
     if isinstance(doc, dict):
         arch["config"]["layers"][-1] = doc  # and the Lambda layer by random JSON
     stem.with_suffix(".json").write_text(json.dumps(arch))
-    _read_or_refuse(_nbrdf, stem)
+    _read_or_refuse(read_nbrdf, stem)

@@ -18,15 +18,22 @@ import numpy as np
 import pytest
 
 import brdffit
-from brdffit import models
+from brdffit import (
+    MeasurementFileError,
+    MissingDependencyError,
+    ParameterError,
+    load_measurements,
+    models,
+    read_merl,
+    read_rgl,
+    read_rgl_at,
+    write_merl,
+)
 from brdffit.cli import main
 from brdffit.core.geometry import MERL_SHAPE
-from brdffit.errors import MeasurementFileError, MissingDependencyError, ParameterError
 from brdffit.io import rgl
-from brdffit.io.load import load_measurements
-from brdffit.io.merl import read_merl, write_merl
 from brdffit.io.merl_grid import merl_grid
-from brdffit.io.rgl import read_rgl, read_rgl_at, rgl_header
+from brdffit.io.rgl import rgl_header
 from brdffit.sweep import rgl_materials
 from tests import rgl_fixture as fx
 

@@ -5,8 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from brdffit import models, synthesize
-from brdffit.errors import ParameterError
+from brdffit import ParameterError, models, synthesize
 
 TRUTH = {"kd": [0.1, 0.2, 0.3], "ks": [0.8, 0.7, 0.9], "f0": [0.9, 0.6, 0.3], "alpha": 0.15}
 

@@ -9,11 +9,9 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from brdffit import MeasurementFileError, ParameterError, load_measurements, read_table
 from brdffit.cli import main
-from brdffit.errors import MeasurementFileError, ParameterError
-from brdffit.io.load import load_measurements
 from brdffit.io.spectra import XYZ_TO_SRGB, cie1931_xyz, spectrum_to_rgb, spectrum_to_xyz
-from brdffit.io.table import read_table
 from brdffit.sweep import table_materials
 
 DIRS = "wi_x,wi_y,wi_z,wo_x,wo_y,wo_z"

@@ -8,12 +8,11 @@ import jax
 import jax.numpy as jnp
 import pytest
 
-from brdffit import models
+from brdffit import ParameterError, models
 from brdffit.cli import main
 from brdffit.core.abstract_model import AbstractModel
 from brdffit.core.geometry import ShadingGeometry
 from brdffit.core.parameters import Parameter, Params
-from brdffit.errors import ParameterError
 from brdffit.models.check import CheckRow, check_model, check_params, extreme_pairs, format_table
 
 KD = Parameter("kd", (3,), (0.0, 1.0), 0.5, "logit", "diffuse albedo, RGB")

@@ -19,8 +19,7 @@ import itertools
 import numpy as np
 import pytest
 
-from brdffit import fit
-from brdffit.core.measurements import Measurements
+from brdffit import Measurements, fit
 from tests.cases import CASES
 from tests.helpers import random_pairs
 

@@ -8,9 +8,8 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from brdffit import models
+from brdffit import ParameterError, models
 from brdffit.core.geometry import spherical_to_vector
-from brdffit.errors import ParameterError
 from tests.helpers import random_pairs
 
 PARAMS = {

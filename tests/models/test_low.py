@@ -9,8 +9,7 @@ import numpy as np
 import pytest
 from scipy import integrate
 
-from brdffit import fit, models
-from brdffit.core.measurements import Measurements
+from brdffit import Measurements, fit, models
 from brdffit.models import low
 from tests.helpers import hemisphere_integral, random_pairs
 

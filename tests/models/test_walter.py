@@ -23,9 +23,8 @@ import numpy as np
 import pytest
 from scipy import integrate, special
 
-from brdffit import fit, models
+from brdffit import fit, models, synthesize
 from brdffit.core.geometry import uniform_hemisphere
-from brdffit.io.synthetic import synthesize
 from brdffit.models import _terms
 from tests.helpers import hemisphere_integral
 

@@ -13,9 +13,8 @@ import numpy as np
 import pytest
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 
-from brdffit import Measurements, models, synthesize
+from brdffit import Measurements, MeasurementsError, models, synthesize
 from brdffit.core.geometry import io_to_halfdiff, merl_indices
-from brdffit.errors import MeasurementsError
 from brdffit.io.merl_grid import lookup, merl_grid, merl_grid_measurements, merl_subgrid
 from brdffit.report.figures import halfdiff_figure, polar_figure, sphere_figure
 from brdffit.report.render import (

@@ -14,10 +14,9 @@ import matplotlib.pyplot as plt
 import numpy as np
 import pytest
 
-from brdffit import FitResult, models, synthesize
+from brdffit import FitResult, models, synthesize, write_fit_html, write_sweep_html
 from brdffit.cli import main
 from brdffit.io.merl import MERL_SCALES
-from brdffit.report.html import write_fit_html, write_sweep_html
 from tests.sweep_fixtures import make_sweep
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"

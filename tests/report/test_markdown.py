@@ -1,4 +1,5 @@
-"""The sweep report: written from the JSON files alone, reproducible, and the CLI around it."""
+"""The sweep report: written from the JSON files alone, reproducible, unconverged fits shown
+and ranked by their loss, unreadable result files skipped and listed, and the CLI around it."""
 
 from __future__ import annotations
 
@@ -9,7 +10,9 @@ import shutil
 import pytest
 
 from brdffit.cli import main
-from brdffit.report.markdown import write_report
+from brdffit.report import write_report
+from brdffit.selection.crossrank import matrices
+from brdffit.selection.sweep_results import load_sweep
 from tests.sweep_fixtures import TABLE, make_sweep
 
 # four steels (one family, so clustered) with a tie for first on steel-2 and steel-4
@@ -82,6 +85,33 @@ def test_report_counts_a_shared_first_place_for_each_model(tmp_path):
     assert re.search(r"\| a \| 1\.50 \[[^|]*\| 3 \[", text), text
     assert re.search(r"\| b \| 1\.50 \[[^|]*\| 3 \[", text), text
     assert re.search(r"\| c \| 3\.00 \[[^|]*\| 0 \[", text), text
+
+
+def test_an_unconverged_fit_with_the_lowest_loss_is_shown_and_ranked_by_it(tmp_path):
+    table = {
+        "steel": {"a": (1.0, 0.1, 1.0, True), "b": (0.5, 0.1, 1.0, False)},  # b: MAX_STEPS
+        "red-plastic": {"a": (1.0, 0.1, 1.0, True), "b": (2.0, 0.1, 1.0, True)},
+    }
+    src = make_sweep(tmp_path / "s", table=table)
+    mx = matrices(load_sweep(src), "low_e2")
+    assert mx.rank[mx.materials.index("steel")].tolist() == [2, 1]
+    text = write_report(src).read_text()
+    row = next(x for x in text.splitlines() if x.startswith("| steel | metal | b |"))
+    cells = [c.strip() for c in row.strip("|").split("|")]
+    assert cells[3] == "0.5" and cells[7] == "1" and cells[-1] == "no", row
+
+
+def test_report_skips_unreadable_result_files_and_lists_them(capsys, tmp_path):
+    root = make_sweep(tmp_path / "sw")
+    first = sorted(root.glob("*/*.json"))[0]
+    first.write_text(first.read_text()[:40])  # truncated
+    (root / "steel" / "x__low_e2.json").write_text(json.dumps({"hello": 1}))  # foreign
+    (root / "steel" / "y__low_e2.json").write_text("[1, 2]")  # not an object
+    code = main(["report", str(root)])
+    out, err = capsys.readouterr()
+    assert code == 0, err
+    for name in (first.name, "x__low_e2.json", "y__low_e2.json"):
+        assert name in err and name in (root / "report" / "report.md").read_text()
 
 
 def _only_result_unreadable(root):

@@ -7,8 +7,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from brdffit import Status, fit, models, rank, synthesize
-from brdffit.errors import ParameterError
+from brdffit import ParameterError, Status, fit, models, rank, synthesize
 from brdffit.selection.rank import LOSS_RTOL, ranks
 
 TRUTH = {"kd": [0.1, 0.2, 0.3], "f0": [0.9, 0.6, 0.3], "alpha": 0.15}

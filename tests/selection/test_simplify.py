@@ -1,5 +1,6 @@
 """Model reduction (brdffit.simplify): synthetic data made without a feature lose it, data
-made with it keep it; the grey and neutral variants' spec round trips; typed errors.
+made with it keep it; a move refused and taken later reads "deferred" in the path; the grey
+and neutral variants' spec round trips; typed errors.
 
 Small strided MERL sub-grids (stride 5, 5, 9: 6,480 cells, about 3,000 inside the 80-degree
 cut) and 5% multiplicative noise keep each search to a few seconds once compiled; both
@@ -16,15 +17,16 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from brdffit import ParameterError, Reduction, models, simplify, synthesize
+from brdffit import ParameterError, Reduction, models, simplify, synthesize, write_sweep_html
 from brdffit.cli import main
 from brdffit.engine import metrics
 from brdffit.engine.uncertainty import block_cells, block_index
 from brdffit.errors import SweepError
 from brdffit.models._restrict import Restricted, make_neutral
-from brdffit.report.html import write_sweep_html
-from brdffit.report.markdown import write_report
+from brdffit.report import write_report
 from brdffit.selection.folds import deal_blocks, fold_t, keep_threshold, sign_count
+from brdffit.selection.reduction import DECISIONS, PathRow
+from brdffit.selection.simplify import _mark_deferred
 from brdffit.selection.survival import has_reduction, survival_table
 from brdffit.sweep import run_sweep, synthetic_materials
 from tests.helpers import random_pairs
@@ -142,6 +144,24 @@ def test_coloured_specular_keeps_its_colour(coloured_reduction):
     assert "diffuse=false" in r.chosen
     assert np.shape(r.result.params["f0"]) == (3,)
     assert np.allclose(r.result.params["f0"], [0.9, 0.6, 0.3], rtol=0.05)
+
+
+def test_simplify_table_defers_a_change_taken_later():
+    """A move refused at step 1 and taken at step 2 reads 'deferred', not 'kept'."""
+
+    def row(step, change, decision):
+        return PathRow(step, f"w[{change}]", change, 8, 1.0, 1.0, np.nan, np.nan, decision)
+
+    path = [
+        row(0, "-", "start"),
+        row(1, "grey ks", "kept"),
+        row(1, "diffuse=false", "removed"),
+        row(1, "grey kd", "kept"),
+        row(2, "grey ks", "chosen"),
+    ]
+    got = [r.decision for r in _mark_deferred(path)]
+    assert got == ["start", "deferred", "removed", "kept", "chosen"]
+    assert set(got) <= set(DECISIONS)
 
 
 def test_fold_t_and_threshold_against_scipy():

@@ -10,7 +10,7 @@ import pytest
 
 pytest.importorskip("distributed")
 
-from brdffit.errors import ParameterError  # noqa: E402
+from brdffit import ParameterError
 from brdffit.sweep.dask_runner import run_on_dask  # noqa: E402
 
 

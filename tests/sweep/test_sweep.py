@@ -19,9 +19,9 @@ import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
-from brdffit import models
+from brdffit import ParameterError, models
 from brdffit.cli import main
-from brdffit.errors import ParameterError, SweepError
+from brdffit.errors import SweepError
 from brdffit.selection.crossrank import matrices
 from brdffit.selection.sweep_results import load_sweep
 from brdffit.sweep import Material, run_sweep, synthetic_materials
