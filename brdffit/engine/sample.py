@@ -58,6 +58,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+from scipy.optimize import nnls
 
 from brdffit.core.abstract_model import AbstractModel
 from brdffit.core.measurements import Measurements
@@ -168,7 +169,6 @@ def _start_sigmas(r0: np.ndarray, scales: np.ndarray, passes: int = 3) -> np.nda
     alone = np.sqrt(np.mean((r0[None, :] / scales) ** 2, axis=1))
     if scales.shape[0] == 1:
         return alone
-    from scipy.optimize import nnls  # deferred: heavy scipy submodule, mixed noise only
 
     a = scales.T**2
     v = alone**2 / scales.shape[0]

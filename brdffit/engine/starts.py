@@ -28,6 +28,8 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+from scipy.special import ndtri
+from scipy.stats import qmc
 
 from brdffit.core.abstract_model import linear_split
 from brdffit.core.parameters import ParameterLayout, Params
@@ -106,8 +108,6 @@ def _spread(
     finite bounds at the same share of its box (both signs of Lafortune's lobe axes);
     an unbounded one at ``u = u_base + 2 Phi^-1(q)`` around ``base``.
     """
-    from scipy.special import ndtri  # deferred: heavy scipy submodule, the screen only
-    from scipy.stats import qmc  # deferred: heavy scipy submodule, the screen only
 
     shape_free = [p for p in layout.free if not p.linear]
     dim = sum(p.size for p in shape_free)

@@ -2,7 +2,7 @@
 
 Modules: ``figures`` (lit spheres, in-plane curves, theta_h x theta_d images, slices of
 data against fits), ``render`` (sphere set-up, lightings, nearest-bin lookup, tone map),
-``selection_figures`` (a sweep's rank matrix and Pareto plot, a reduction's path),
+``selection_figures`` (a sweep's rank matrix and Pareto plot),
 ``sweep_sections`` (a sweep report's tables and figures per metric, for both writers),
 ``markdown`` (the Markdown sweep report, :func:`write_report`) and ``html`` (one-file
 HTML reports of a fit and of a sweep, :func:`write_fit_html`, :func:`write_sweep_html`).
