@@ -30,7 +30,7 @@ Run from the repository root: ``python3 benchmarks/simplify_recovery.py [--seeds
 FILE.py]``. With ``--cache`` every search is appended to that file (JSON lines), so a
 killed run resumes where it stopped, and the table is rebuilt from it. ``--impl`` runs
 the ``simplify`` of another file instead (e.g. an earlier version from git, ``git show
-REV:brdffit/simplify.py > /tmp/old.py``), to compare methods on the same data.
+REV:brdffit/selection/simplify.py > /tmp/old.py``), to compare methods on the same data.
 
 Latest numbers: ``benchmarks/results/simplify_recovery.md`` (machine, versions, seeds
 and wall time are in its header).
