@@ -20,8 +20,10 @@ the next run.
 Times are measured in the worker the same way for every model: ``wall_time`` is the
 fit's own clock (:func:`brdffit.fit`, compile included on a worker's first fit of a
 model and grid shape, so compare medians over materials); ``eval_ns_per_sample`` is
-the best of 3 warm calls of ``jax.jit(model.eval)`` at the fitted parameters on the
-material's valid directions tiled to ``eval_n`` samples.
+the model's own evaluation at the fitted parameters, best of 3 warm measurements, on
+the material's valid directions tiled to ``eval_n`` samples, with the shading geometry
+computed beforehand (:func:`brdffit.engine.timing.eval_ns_per_sample`, the timer
+:func:`brdffit.simplify` uses too).
 
 Engine: Dask distributed (:mod:`brdffit.sweep.dask_runner`). With ``scheduler`` the tasks run on
 that cluster; without it on a LocalCluster of ``jobs`` worker processes (default one
