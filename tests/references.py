@@ -15,7 +15,7 @@ digits and an unbounded exponent, so the formulas are written as printed (``tan(
 ``10^(1e5)`` costs the reference anything a float64 model could resolve. The float64 inputs
 are taken exactly as given (a float64 "unit" vector lies within an ulp or two of the sphere;
 cosines are its components and dot products, as in the models); only the half vector is
-normalised. Nothing here calls ``models/`` or ``_terms``.
+normalised. Nothing here calls ``brdffit/models/`` or ``_terms``.
 Where a test file already held a numpy transcription, the formula here follows it line by
 line (named in each docstring); those are float64-only (``np.arccos``, ``np.pi``, module
 direction tables), so they are rewritten, not imported.

@@ -1,4 +1,4 @@
-"""High-precision reference for ``models/sgd.py``: Bagher, Soler, Holzschuch 2012 written
+"""High-precision reference for ``brdffit/models/sgd.py``: Bagher, Soler, Holzschuch 2012 written
 out again in mpmath (30 digits), independently of the model's numerics.
 
 * ``D`` in the paper's slope form ``P22(x) = alpha^(p-1) exp(-(alpha^2 + x)/alpha) /

@@ -1,4 +1,4 @@
-"""High-precision reference for ``models/std.py``: the paper's formulas in mpmath.
+"""High-precision reference for ``brdffit/models/std.py``: the paper's formulas in mpmath.
 
 An independent transcription of Ribardière et al. 2017 (STD), evaluated elementwise at
 ``mp.dps = 40`` (``REFERENCES["std"]``): the NDF as the slope density over ``cos^4``,

@@ -1,4 +1,4 @@
-"""The model contract every file in ``models/`` follows.
+"""The model contract every file in ``brdffit/models/`` follows.
 
 A model is a frozen equinox Module whose fields are its *static options* (lobe
 count, Fresnel variant, optional lobes): chosen when the model is built, so a

@@ -1,7 +1,7 @@
 """The geometric and radiometric core of the figures: lit spheres, data lookup, tone map.
 
 Nothing here draws or calls a solver; everything returns numpy arrays (float64).
-:mod:`brdffit.figures` turns them into pictures.
+:mod:`brdffit.report.figures` turns them into pictures.
 
 Units and conventions: BRDF values ``f(wi, wo)`` are in 1/sr, per linear RGB channel;
 ``wi`` and ``wo`` are unit (n, 3) directions in the local shading frame (normal +z), ``wi``
