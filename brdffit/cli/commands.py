@@ -28,6 +28,7 @@ from brdffit.models import label
 from brdffit.models.check import check_model, format_table
 from brdffit.report.html import write_fit_html, write_sweep_html
 from brdffit.report.markdown import write_report
+from brdffit.report.posterior_figures import corner_figure
 from brdffit.selection.families import read_families
 from brdffit.selection.rank import fit_models, rank
 from brdffit.selection.simplify import simplify
@@ -198,10 +199,7 @@ def cmd_sample(args) -> None:
         _say(f"brdffit sample: warning: {' '.join(text.split())}")
     print(dataclasses.replace(post, warnings=()).summary())
     if args.corner:
-        import matplotlib  # deferred: heavy, figures only
-
-        matplotlib.use("Agg")
-        save_figure(post.corner(), args.corner, dpi=80)
+        save_figure(corner_figure(post, fit=r), args.corner, dpi=80)
     if args.json:
         _write(args.json, post.to_json())
 

@@ -4,7 +4,8 @@ posterior -> HTML report and renderer materials.
 Everything is made here (no external data): a blue plastic under the Walter/GGX +
 Lambert model with 5% log-normal noise and 2% missing cells, written as a MERL binary
 and read back, fitted by Lambert, Blinn-Phong and Walter/GGX, ranked, and the best
-model's posterior sampled with emcee. The best fit gets a one-file HTML report (lit
+model's posterior sampled with emcee and drawn (corner plot with the LM marks, walker
+traces, predictive band on in-plane slices). The best fit gets a one-file HTML report (lit
 spheres, in-plane plots, theta_h x theta_d images) and is exported to Mitsuba 3 and
 glTF 2.0 (each export says whether it is exact and its measured error). All outputs
 are written atomically to one folder.
@@ -27,6 +28,7 @@ from brdffit.io.merl_grid import merl_subgrid
 from brdffit.io.synthetic import synthesize
 from brdffit.report.figures import plot_slices
 from brdffit.report.html import write_fit_html
+from brdffit.report.posterior_figures import corner_figure, predictive_figure, trace_figure
 from brdffit.selection.rank import rank
 from brdffit.util.atomic import save_figure, write_text
 
@@ -100,19 +102,15 @@ def run_demo(
     files["posterior"] = out / "posterior.json"
     write_text(files["posterior"], json.dumps({**post.to_dict(), "truth": TRUTH}, indent=2))
 
-    import matplotlib  # deferred: heavy, figures only
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt  # deferred: heavy, figures only
-
     files["corner"] = out / "corner.png"
-    fig = post.corner(truths=TRUTH if best.model == "walter" else None)
-    save_figure(fig, files["corner"], dpi=80)
-    plt.close(fig)
+    truths = TRUTH if best.model == "walter" else None
+    save_figure(corner_figure(post, fit=best, truths=truths), files["corner"], dpi=80)
+    files["traces"] = out / "traces.png"
+    save_figure(trace_figure(post), files["traces"], dpi=80)
+    files["predictive"] = out / "predictive.png"
+    save_figure(predictive_figure(post, fit_data, best), files["predictive"], dpi=90)
     files["slices"] = out / "slices.png"
-    fig = plot_slices(fit_data, results)
-    save_figure(fig, files["slices"], dpi=90)
-    plt.close(fig)
+    save_figure(plot_slices(fit_data, results), files["slices"], dpi=90)
 
     files["html"] = write_fit_html(out / "report.html", best, fit_data)
     for e, paths in write_exports(best, ("mitsuba", "gltf"), out / f"material.{best.model}"):

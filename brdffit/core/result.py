@@ -1,66 +1,31 @@
 """`FitResult`: what a Levenberg-Marquardt fit found, its report and its JSON form.
 
+The report (text) and its HTML form are written by :mod:`brdffit.core.result_text`.
+
 Losses per sample: ``low_e1`` and ``low_e2`` are sums over the samples (RGB summed within
 each), so the same material fitted on a strided sub-grid and on the full grid gives
 sums that differ by the ratio of sample counts (56x between ``--stride 3 3 5`` and
-the full grid on one measured material). :func:`per_sample` divides them by the sample
-count; ``ngan`` (a solid-angle weighted RMS) and ``log1p_l1`` (a mean) are normalised
-already and are their own per-sample value. Reports and JSON give both, named.
+the full grid on one measured material). :func:`~brdffit.core.result_terms.per_sample`
+divides them by the sample count; ``ngan`` (a solid-angle weighted RMS) and ``log1p_l1``
+(a mean) are normalised already and are their own per-sample value. Reports and JSON
+give both, named.
 """
 
 from __future__ import annotations
 
 import enum
-import html
 import json
 import math
 from dataclasses import dataclass, field
 
 import numpy as np
 
-AT_BOUND_RTOL = 1e-6
-"""A free scalar within this relative distance of a bound is flagged ``at bound``."""
-
-AT_BOUND_ATOL = 1e-9
-"""... or within this absolute distance (bounds at 0); such a value is printed as 0."""
-
-SUMMED_METRICS = ("low_e1", "low_e2")
-"""Metrics whose loss is a sum over samples (:mod:`brdffit.engine.metrics`: unnormalised
-``sin theta_i`` weights); the others are a weighted RMS (``ngan``) or a mean
-(``log1p_l1``)."""
-
-
-#: The side, in degrees of (theta_h, theta_d), of the blocks that ``errors="blocks"``
-#: treats as independent (:func:`brdffit.engine.uncertainty.block_covariance`).
-BLOCK_DEG = 10.0
-
-
-def errors_assumed(method: str, n_blocks: int = 0) -> str:
-    """What the standard errors of ``method`` (``sandwich``, ``classic``, ``blocks``) assume,
-    in the words reports print beside them."""
-    if method == "classic":
-        return "residuals independent, one variance; errors by classic (s^2 (J^T J)^-1)"
-    if method == "blocks":
-        return (
-            f"residuals correlated within {BLOCK_DEG:g}-degree (theta_h, theta_d) blocks, "
-            f"independent between them; errors by block jackknife over {n_blocks} blocks"
-        )
-    return "residuals independent, any variance; errors by sandwich"
-
-
-def per_sample(metric: str, loss: float, n_samples: int) -> float:
-    """The loss of ``metric`` per sample (module docstring): ``loss / n_samples`` for the
-    summed metrics, ``loss`` itself for the normalised ones; NaN without samples."""
-    if metric not in SUMMED_METRICS:
-        return float(loss)
-    return float(loss) / n_samples if n_samples > 0 else float("nan")
-
-
-def loss_kind(metric: str) -> str:
-    """What a loss value of ``metric`` is: ``"sum"``, ``"RMS"`` or ``"mean"`` over samples."""
-    if metric in SUMMED_METRICS:
-        return "sum"
-    return "RMS" if metric == "ngan" else "mean"
+from brdffit.core import result_text
+from brdffit.core.result_terms import (
+    SUMMED_METRICS,
+    loss_kind,
+    per_sample,
+)
 
 
 class Status(enum.Enum):
@@ -77,7 +42,7 @@ def _floats(a: object) -> list[float] | float:
     return float(arr) if arr.ndim == 0 else arr.tolist()
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, repr=False)
 class FitResult:
     """The outcome of :func:`brdffit.fit`; every field is always present.
 
@@ -255,121 +220,37 @@ class FitResult:
             error_blocks=int(d.get("error_blocks", 0)),
         )
 
-    def _coarse_text(self) -> str:
-        if not self.coarse_samples:
-            return ""
-        return f"; starts on {self.coarse_samples} samples, {self.coarse_steps} steps"
-
     def report(self, correl_min: float = 0.3) -> str:
-        """Human-readable report in the spirit of lmfit's ``fit_report``.
+        """Human-readable report in the spirit of lmfit's ``fit_report``
+        (:func:`brdffit.core.result_text.report`).
 
         Each scalar is ``value +/- error (relative %)``; a scalar without a finite error
         says so in words (``0 (at bound; no error)``), and the flags ``at bound``, ``not
         identified`` and ``did not move`` name only the channels they concern. The
         metric's value is given as computed (a sum, RMS or mean) and per sample.
         """
-        opts = ", ".join(f"{k}={v!r}" for k, v in self.options.items())
-        cut = "no angle cut" if self.cut_deg is None else f"theta_i, theta_o < {self.cut_deg:g} deg"
-        others = ", ".join(
-            f"{k} {_loss_text(k, v, self.n_samples)}"
-            for k, v in self.losses.items()
-            if k != self.metric
-        )
-        lines = [
-            f"[[Fit]] {self.model}({opts}) on {self.source}",
-            f"    metric           {self.metric} = "
-            f"{_loss_text(self.metric, self.loss, self.n_samples)}   ({cut})",
-            f"    other metrics    {others}",
-            f"    noise model      {errors_assumed(self.errors_method, self.error_blocks)}"
-            + (f"; {self.robust} loss, scale {self.robust_scale:.3g}" if self.robust else ""),
-            f"    status           {self.status.value}",
-            f"    steps            {self.n_steps} "
-            f"(best of {self.n_starts} starts{self._coarse_text()})",
-            f"    wall time        {self.wall_time:.3f} s",
-            f"    samples          {self.n_samples} ({self.n_data} residuals), "
-            f"{self.n_free} free parameters",
-            f"    AIC / BIC        {self.aic:.6g} / {self.bic:.6g}   (n = residuals)",
-            f"    cond(J^T J)      {self.condition_number:.3g}",
-            "[[Parameters]]",
-        ]
-        for name, value in self.params.items():
-            lines += self._parameter_lines(name, value)
-        if self.errors_reason:
-            lines.append(f"    (no uncertainties: {self.errors_reason})")
-        lines += self._correlation_lines(correl_min)
-        for w in self.warnings:
-            lines.append(f"[[Warning]] {w}")
-        return "\n".join(lines)
-
-    def _parameter_lines(self, name: str, value: np.ndarray) -> list[str]:
-        """One report line per scalar of parameter ``name``."""
-        flat = np.atleast_1d(value)
-        init = np.atleast_1d(self.init_params.get(name, np.full_like(flat, np.nan)))
-        err = None if self.stderr is None else np.atleast_1d(self.stderr[name])
-        out = []
-        for c in range(flat.size):
-            label = name if flat.size == 1 else f"{name}[{'rgb'[c]}]"
-            v, frozen, at = float(flat[c]), name in self.frozen, label in self.at_bound
-            text = value_text(v, None if err is None else float(err[c]), frozen=frozen, at_bound=at)
-            flags = [
-                f
-                for f, on in (("at bound", at), ("not identified", label in self.not_identified))
-                if on
-            ]
-            if not frozen and np.isclose(v, init[c], rtol=1e-9, atol=0):
-                flags.append("did not move")
-            flag = f"  [{', '.join(flags)}]" if flags else ""
-            out.append(f"    {label:<14} {text:<36} start {init[c]:.4g}{flag}")
-        return out
-
-    def _correlation_lines(self, correl_min: float) -> list[str]:
-        if self.correlation is None:
-            return []
-        pairs = []
-        n = len(self.labels)
-        for i in range(n):
-            for j in range(i + 1, n):
-                r = self.correlation[i, j]
-                if abs(r) >= correl_min:
-                    pairs.append((abs(r), f"    C({self.labels[i]}, {self.labels[j]}) = {r:+.4f}"))
-        if not pairs:
-            return []
-        return [f"[[Correlations]] (|C| >= {correl_min})"] + [
-            p for _, p in sorted(pairs, reverse=True)
-        ]
+        return result_text.report(self, correl_min)
 
     def _repr_html_(self) -> str:
-        return f"<pre>{html.escape(self.report())}</pre>"
+        """The report as HTML tables for Jupyter, from the same fields as :meth:`report`."""
+        return result_text.report_html(self)
 
+    def __str__(self) -> str:
+        return self.report()
 
-def _loss_text(metric: str, loss: float, n_samples: int) -> str:
-    """``1.59 (sum over 1252 samples; 0.00127 per sample)`` or ``0.0557 (RMS)``."""
-    kind = loss_kind(metric)
-    if kind != "sum":
-        return f"{loss:.6g} ({kind} over samples)"
-    mean = per_sample(metric, loss, n_samples)
-    return f"{loss:.6g} (sum over {n_samples} samples; {mean:.6g} per sample)"
+    def __repr__(self) -> str:
+        """One line: ``<FitResult walter low_e2=1.234 (per sample 5.6e-05), 7 free, CONVERGED>``."""
+        per = (
+            "" if self.metric not in SUMMED_METRICS else f" (per sample {self.loss_per_sample:.4g})"
+        )
+        return (
+            f"<FitResult {self.model} {self.metric}={self.loss:.4g}{per}, "
+            f"{self.n_free} free, {self.status.name}>"
+        )
 
-
-def value_text(v: float, err: float | None, *, frozen: bool = False, at_bound: bool = False) -> str:
-    """A scalar and its standard error as the report prints them.
-
-    ``value +/- error (relative %)``; ``(frozen)``; ``+/- (none)`` when the fit has no
-    errors at all; ``(at bound; no error)`` or ``(no error)`` when this scalar's error
-    is not finite (held on a bound, or singular). A value at a bound within
-    :data:`AT_BOUND_ATOL` of 0 prints as 0 (the solver's round-off, e.g. 4e-18, is not a
-    value), and the relative error is left out when the value is 0: never ``nan%``.
-    """
-    if at_bound and abs(v) <= AT_BOUND_ATOL:
-        v = 0.0
-    if frozen:
-        return f"{v:.6g} (frozen)"
-    if err is None:
-        return f"{v:.6g} +/- (none)"
-    if not math.isfinite(err):
-        return f"{v:.6g} ({'at bound; ' if at_bound else ''}no error)"
-    rel = f" ({abs(err / v) * 100:.2f}%)" if v != 0 else ""
-    return f"{v:.6g} +/- {err:.3g}{rel}"
+    def _repr_pretty_(self, p: object, cycle: bool) -> None:
+        """IPython's text form: the report."""
+        p.text(repr(self) if cycle else self.report())
 
 
 def scalar_labels(names: object, params: dict) -> tuple[str, ...]:

@@ -1,4 +1,4 @@
-"""The posterior a sampler returns: chains, diagnostics, summary, corner plot; its warnings.
+"""The posterior a sampler returns: chains, diagnostics, summary, display; its warnings.
 
 :class:`Posterior` is what :func:`brdffit.engine.sample.sample` returns; the warning classes
 are the ones it raises about the chain, and :func:`scalars_at_bound` is the at-bound check
@@ -23,20 +23,25 @@ prior's truncation, not the data: report such intervals as limits.
 
 from __future__ import annotations
 
+import html
 import json
 import math
-from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from brdffit.core.parameters import Parameter, ParameterLayout
 from brdffit.errors import ChainTooShortError
+from brdffit.util.text_table import render
 
 AT_BOUND_SPAN = 0.01
 """At-bound check: largest gap to the bound, as a share of the span (prior coordinate)."""
 AT_BOUND_WIDTH = 0.05
 """At-bound check: largest gap to the bound, as a share of the 95% interval's width."""
+
+SUMMARY_HEAD = ("scalar", "median", "2.5%", "97.5%", "tau", "ESS", "R-hat")
+"""The columns of :meth:`Posterior.summary` (the HTML form adds ``flags``)."""
+_WIDTHS = (12, 12, 12, 8, 8, 7)  # of the summary's right-aligned columns after the label
 
 
 class ChainTooShortWarning(UserWarning):
@@ -60,7 +65,9 @@ class Posterior:
     ``burn``; ``burn``; ``n_subsample`` samples the likelihood used; ``stuck_walkers``
     indices of walkers that barely moved; ``at_bound`` (label, bound) pairs of the
     scalars whose posterior is piled against that bound (natural units; module
-    docstring); ``wall_time`` (s); ``warnings``.
+    docstring); ``wall_time`` (s); ``warnings``; ``fixed`` the values of the parameters
+    held fixed while sampling (name -> array, natural units), so that every sample names
+    a whole parameter set (:meth:`parameter_sets`).
     """
 
     model: str
@@ -78,6 +85,7 @@ class Posterior:
     at_bound: tuple[tuple[str, float], ...]
     wall_time: float
     warnings: tuple[str, ...]
+    fixed: dict[str, np.ndarray] = field(default_factory=dict)
 
     @property
     def n_steps(self) -> int:
@@ -120,34 +128,107 @@ class Posterior:
             )
         return self.autocorr_time
 
+    def parameter_sets(self, samples: np.ndarray) -> dict[str, np.ndarray]:
+        """Rows of ``samples`` (n, dim), as from :meth:`samples`, as whole parameter sets:
+        name -> array (n, *shape) in natural units, the fixed parameters repeated.
+
+        The model's parameters only: the noise scales (``log_sigma*``) are left out.
+        """
+        samples = np.atleast_2d(samples)
+        n = samples.shape[0]
+        columns: dict[str, list[int]] = {}
+        for i, lab in enumerate(self.labels):
+            if not lab.startswith("log_sigma"):
+                columns.setdefault(lab.split("[", 1)[0], []).append(i)
+        out = {
+            name: samples[:, ix[0]] if len(ix) == 1 and "[" not in self.labels[ix[0]]
+            else samples[:, ix]
+            for name, ix in columns.items()
+        }  # fmt: skip
+        for name, v in self.fixed.items():
+            v = np.asarray(v, float)
+            out[name] = np.broadcast_to(v, (n, *v.shape)).copy()
+        return out
+
     def quantiles(self, q: tuple[float, ...] = (0.025, 0.5, 0.975)) -> dict[str, np.ndarray]:
         """Quantiles of each sampled scalar, label -> array of len(q)."""
         s = self.samples()
         return {lab: np.quantile(s[:, i], q) for i, lab in enumerate(self.labels)}
 
-    def summary(self) -> str:
-        """Text table: median and 95% interval, autocorrelation, ESS, R-hat per scalar."""
-        lines = [
-            f"[[Posterior]] {self.model} ({self.metric}, noise {self.noise}), "
+    def _headline(self) -> tuple[str, str]:
+        """The two lines above the summary's table: the run, then acceptance and wall time."""
+        acc = self.acceptance_fraction
+        return (
+            f"{self.model} ({self.metric}, noise {self.noise}), "
             f"{self.chain.shape[1]} walkers x {self.n_steps} steps, burn {self.burn}, "
             f"{self.n_subsample} samples in the likelihood",
-            f"    acceptance fraction {np.mean(self.acceptance_fraction):.3f} "
-            f"(min {np.min(self.acceptance_fraction):.3f}); wall time {self.wall_time:.1f} s",
-            f"    {'scalar':<14} {'median':>12} {'2.5%':>12} {'97.5%':>12} "
-            f"{'tau':>8} {'ESS':>8} {'R-hat':>7}",
-        ]
-        rhat = self.split_rhat()
+            f"acceptance fraction {np.mean(acc):.3f} (min {np.min(acc):.3f}); "
+            f"wall time {self.wall_time:.1f} s",
+        )
+
+    def summary_rows(self) -> list[tuple[tuple[str, ...], tuple[str, ...]]]:
+        """The rows of :meth:`summary` and of the HTML table, one per sampled scalar:
+        the cells under :data:`SUMMARY_HEAD` (label, median, 2.5%, 97.5%, tau, ESS, R-hat,
+        as text) and the flags (``at bound 0``, one per bound the posterior is piled on)."""
+        rhat, ess = self.split_rhat(), self.ess
+        out = []
         for i, (lab, qs) in enumerate(self.quantiles().items()):
-            flag = "".join(f"  at bound {b:g}" for name, b in self.at_bound if name == lab)
-            lines.append(
-                f"    {lab:<14} {qs[1]:>12.6g} {qs[0]:>12.6g} {qs[2]:>12.6g} "
-                f"{self.autocorr_time[i]:>8.1f} {self.ess[i]:>8.0f} {rhat[i]:>7.3f}{flag}"
+            cells = (
+                lab,
+                *(f"{q:.6g}" for q in (qs[1], qs[0], qs[2])),
+                f"{self.autocorr_time[i]:.1f}",
+                f"{ess[i]:.0f}",
+                f"{rhat[i]:.3f}",
             )
+            flags = tuple(f"at bound {b:g}" for name, b in self.at_bound if name == lab)
+            out.append((cells, flags))
+        return out
+
+    def summary(self) -> str:
+        """Text table: median and 95% interval, autocorrelation, ESS, R-hat per scalar."""
+
+        def line(cells: tuple[str, ...]) -> str:
+            nums = " ".join(f"{c:>{w}}" for c, w in zip(cells[1:], _WIDTHS, strict=True))
+            return f"    {cells[0]:<14} {nums}"
+
+        run, acceptance = self._headline()
+        lines = [f"[[Posterior]] {run}", f"    {acceptance}", line(SUMMARY_HEAD)]
+        for cells, flags in self.summary_rows():
+            lines.append(line(cells) + "".join(f"  {f}" for f in flags))
         lines += [f"[[Warning]] {w}" for w in self.warnings]
         return "\n".join(lines)
 
+    def _repr_html_(self) -> str:
+        """:meth:`summary` as HTML for Jupyter: the run, one table row per sampled scalar
+        (with its flags), the warnings; from the same rows as :meth:`summary`."""
+        run, acceptance = self._headline()
+        body = [[*cells, ", ".join(flags)] for cells, flags in self.summary_rows()]
+        out = [
+            '<div class="brdffit-posterior">',
+            f"<p><b>Posterior: {html.escape(run)}</b><br>{html.escape(acceptance)}</p>",
+            render((*SUMMARY_HEAD, "flags"), body, "html").rstrip("\n"),
+        ]
+        out += [f'<p style="color:#a33">Warning: {html.escape(w)}</p>' for w in self.warnings]
+        return "\n".join([*out, "</div>"])
+
+    def __str__(self) -> str:
+        return self.summary()
+
+    def __repr__(self) -> str:
+        """One line: model, metric, noise, scalars, walkers x steps, warnings."""
+        return (
+            f"<Posterior {self.model} {self.metric}, noise {self.noise}, "
+            f"{len(self.labels)} scalars, {self.chain.shape[1]} walkers x {self.n_steps} steps, "
+            f"{len(self.warnings)} warning{'' if len(self.warnings) == 1 else 's'}>"
+        )
+
+    def _repr_pretty_(self, p: object, cycle: bool) -> None:
+        """IPython's text form: the summary."""
+        p.text(repr(self) if cycle else self.summary())
+
     def to_dict(self) -> dict:
-        """JSON-ready summary (not the chain): quantiles, diagnostics, warnings."""
+        """JSON-ready summary (not the chain): quantiles, diagnostics, warnings, the fixed
+        parameters' values."""
         return {
             "model": self.model,
             "options": dict(self.options),
@@ -167,31 +248,12 @@ class Posterior:
             "at_bound": [[lab, b] for lab, b in self.at_bound],
             "wall_time": self.wall_time,
             "warnings": list(self.warnings),
+            "fixed": {k: np.asarray(v).tolist() for k, v in self.fixed.items()},
         }
 
     def to_json(self, indent: int | None = 2) -> str:
         """The JSON text of :meth:`to_dict`."""
         return json.dumps(self.to_dict(), indent=indent)
-
-    def corner(self, truths: Mapping[str, object] | None = None, **kwargs: object):
-        """Corner plot (the ``corner`` package) of the kept samples; returns the figure.
-
-        ``truths`` maps parameter names to values (RGB arrays expand to channels).
-        """
-        import corner  # deferred: heavy (imports matplotlib), figures only
-
-        t = None
-        if truths is not None:
-            flat = {}
-            for name, v in truths.items():
-                v = np.atleast_1d(np.asarray(v, float))
-                keys = [name] if v.size == 1 else [f"{name}[{c}]" for c in "rgb"]
-                flat.update(dict(zip(keys, v, strict=True)))
-            t = [flat.get(lab) for lab in self.labels]
-        kwargs.setdefault("quantiles", [0.025, 0.5, 0.975])
-        kwargs.setdefault("show_titles", True)
-        kwargs.setdefault("title_fmt", ".4g")
-        return corner.corner(self.samples(), labels=list(self.labels), truths=t, **kwargs)
 
 
 def _bound_coordinate(p: Parameter, x: np.ndarray) -> np.ndarray | None:

@@ -369,6 +369,7 @@ def sample(
         at_bound=at_bound,
         wall_time=time.perf_counter() - t0,
         warnings=tuple(text for text, _ in notes),
+        fixed={k: np.asarray(v, float) for k, v in frozen.items()},
     )
 
 

@@ -23,7 +23,7 @@ estimates agree within their stated 95%): CR1 58.5%, CR2 (half the leverage
 correction, :func:`block_covariance` with ``power=0.5``) 86.6%, CR3 100% (median
 ``|z|`` 0.28 where 0.67 would be exact). CR3 is the only one not overconfident there,
 so it is the default of ``"blocks"``; its intervals are wider than needed on these
-halves. It needs many blocks (it counts them, :func:`brdffit.core.result.errors_assumed`)
+halves. It needs many blocks (it counts them, :func:`brdffit.core.result_terms.errors_assumed`)
 and none that alone identifies a parameter.
 
 Only k x k matrices (``J^T J`` and ``J^T diag(r^2) J``, formed on the device by
@@ -43,7 +43,8 @@ import numpy as np
 from jaxtyping import Array
 
 from brdffit.core.parameters import ParameterLayout, Params
-from brdffit.core.result import AT_BOUND_ATOL, AT_BOUND_RTOL, BLOCK_DEG, FitResult, Status
+from brdffit.core.result import FitResult, Status
+from brdffit.core.result_terms import AT_BOUND_ATOL, AT_BOUND_RTOL, BLOCK_DEG
 from brdffit.engine import objective as objective_mod
 from brdffit.engine.metrics import Metric, Prepared
 from brdffit.engine.objective import Objective

@@ -15,8 +15,7 @@ Exposure: the same for data and fit, ``1 / (99th percentile of the fit's brighte
 channel on the sphere)`` unless given, and printed on the figure.
 
 :func:`plot_slices` draws data against several fitted models, ``f cos(theta_i)`` along
-``theta_h``, with pyplot (close it when done; :func:`brdffit.util.atomic.save_figure`
-saves it).
+``theta_h``; :func:`brdffit.util.atomic.save_figure` saves any of them.
 """
 
 from __future__ import annotations
@@ -41,6 +40,7 @@ from brdffit.report.render import (
     merl_stride,
     model_brdf,
     nearest_bin,
+    slice_indices,
     sphere_images,
     sphere_normals,
     tonemap,
@@ -257,25 +257,16 @@ def plot_slices(
     theta_d_deg: Sequence[float] = (5.0, 30.0, 60.0),
     phi_d_deg: float = 90.0,
     channel: int = 1,
-):
+) -> Figure:
     """``f cos(theta_i)`` against ``theta_h`` at a few ``theta_d``, data dots and model lines.
 
-    The samples nearest to each (theta_d, phi_d) slice are taken from ``data`` (valid
-    samples only); the y axis is logarithmic.
+    The samples nearest to each (theta_d, phi_d) line are taken from ``data`` (valid
+    samples only, :func:`brdffit.report.render.slice_indices`); the y axis is logarithmic.
     """
-    import matplotlib.pyplot as plt  # deferred: pyplot picks a backend; this figure only
-
-    fig, axes = plt.subplots(
-        1, len(theta_d_deg), figsize=(4.2 * len(theta_d_deg), 3.6), sharey=True, squeeze=False
-    )
-    td = np.rad2deg(data.theta_d)
-    pd = np.rad2deg(data.phi_d)
+    fig = Figure(figsize=(4.2 * len(theta_d_deg), 3.6), layout="constrained")
+    axes = fig.subplots(1, len(theta_d_deg), sharey=True, squeeze=False)
     for ax, t in zip(axes[0], theta_d_deg, strict=True):
-        near_td = td[data.valid][np.argmin(np.abs(td[data.valid] - t))]
-        near_pd = pd[data.valid][np.argmin(np.abs(pd[data.valid] - phi_d_deg))]
-        sel = data.valid & np.isclose(td, near_td) & np.isclose(pd, near_pd)
-        idx = np.flatnonzero(sel)
-        idx = idx[np.argsort(data.theta_h[idx])]
+        idx, near_td, near_pd = slice_indices(data, t, phi_d_deg)
         th = np.rad2deg(data.theta_h[idx])
         cos_i = data.wi[idx, 2]
         ax.semilogy(th, data.values[idx, channel] * cos_i, ".", color="k", ms=3, label="data")
@@ -291,7 +282,6 @@ def plot_slices(
         ax.set_xlabel("theta_h (deg)")
     axes[0][0].set_ylabel(f"f cos theta_i, channel {'RGB'[channel]} (1/sr)")
     axes[0][-1].legend(fontsize=7)
-    fig.tight_layout()
     return fig
 
 

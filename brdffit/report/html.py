@@ -28,7 +28,8 @@ from pathlib import Path
 import numpy as np
 
 from brdffit.core.measurements import Measurements
-from brdffit.core.result import FitResult, errors_assumed
+from brdffit.core.result import FitResult
+from brdffit.core.result_terms import errors_assumed
 from brdffit.errors import MeasurementsError
 from brdffit.report.sweep_sections import metric_sections, read_sweep
 from brdffit.selection.rank import NOTE, TIES

@@ -90,6 +90,25 @@ def _eval(model: AbstractModel, params: dict, wi: jax.Array, wo: jax.Array) -> j
     return model.eval(params, wi, wo)
 
 
+def slice_indices(
+    data: Measurements, theta_d_deg: float, phi_d_deg: float
+) -> tuple[np.ndarray, float, float]:
+    """The valid samples of ``data`` on one (theta_d, phi_d) line, sorted by theta_h.
+
+    The line is the measured (theta_d, phi_d) pair nearest to the asked one (degrees);
+    returns the sample indices and that pair in degrees. ``phi_d`` = 0 is the plane of
+    incidence (light, normal and viewer in one plane).
+    """
+    td, pd = np.rad2deg(data.theta_d), np.rad2deg(data.phi_d)
+    ok = np.flatnonzero(data.valid)
+    if ok.size == 0:
+        raise MeasurementsError(f"{data.source}: no valid samples to slice")
+    near_td = td[ok][np.argmin(np.abs(td[ok] - theta_d_deg))]
+    near_pd = pd[ok][np.argmin(np.abs(pd[ok] - phi_d_deg))]
+    idx = np.flatnonzero(data.valid & np.isclose(td, near_td) & np.isclose(pd, near_pd))
+    return idx[np.argsort(data.theta_h[idx])], float(near_td), float(near_pd)
+
+
 def merl_stride(data: Measurements) -> tuple[int, int, int]:
     """The stride of the MERL (sub-)grid ``data`` lies on, in file order.
 

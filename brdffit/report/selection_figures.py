@@ -1,17 +1,17 @@
 """Figures of model selection across a sweep: the rank matrix and the Pareto plot.
 
 Each function takes the tables and results of :mod:`brdffit.selection` (never a solver)
-and draws them with pyplot: :func:`rank_matrix_figure` (ranks per material,
-:mod:`brdffit.selection.crossrank`), :func:`pareto_figure` (error against run time,
-:mod:`brdffit.selection.pareto`). (A reduction plots itself:
-:meth:`brdffit.Reduction.plot`.) Saving and closing are the
-caller's business. matplotlib is imported when a figure is drawn, so importing this
-module (the sweep reports do) does not load it.
+and returns a matplotlib :class:`~matplotlib.figure.Figure` not registered with pyplot
+(nothing to close; in Jupyter it shows as a cell's value): :func:`rank_matrix_figure`
+(ranks per material, :mod:`brdffit.selection.crossrank`), :func:`pareto_figure` (error
+against run time, :mod:`brdffit.selection.pareto`). (A reduction plots itself:
+:meth:`brdffit.Reduction.plot`.)
 """
 
 from __future__ import annotations
 
 import numpy as np
+from matplotlib.figure import Figure
 
 from brdffit.selection.crossrank import AggregateRow, Matrices, aggregate, material_order
 from brdffit.selection.pareto import ParetoRow, pareto_caption
@@ -25,8 +25,6 @@ def rank_matrix_figure(mx: Matrices, rows: tuple[AggregateRow, ...] | None = Non
     from its labels (constrained layout; the image at least 2.2 in tall, so the colour
     bar holds its label), so no label is cut off.
     """
-    import matplotlib.pyplot as plt  # deferred: heavy, figures only
-
     order = material_order(mx)
     cols = [mx.models.index(r.model) for r in (rows or aggregate(mx, n_boot=1))]
     img = mx.rank[np.ix_(order, cols)]
@@ -35,7 +33,8 @@ def rank_matrix_figure(mx: Matrices, rows: tuple[AggregateRow, ...] | None = Non
     xlabels = [mx.models[c] for c in cols]
     y_room, x_room = (0.06 * max(map(len, lab), default=0) for lab in (ylabels, xlabels))
     size = (1.9 + 0.55 * k + y_room, 1.1 + max(0.25 * n, 2.2) + 0.87 * x_room)
-    fig, ax = plt.subplots(figsize=size, layout="constrained")
+    fig = Figure(figsize=size, layout="constrained")
+    ax = fig.subplots()
     im = ax.imshow(img, cmap="viridis_r", aspect="auto", vmin=1, vmax=max(k, 2))
     ax.set_xticks(range(k), xlabels, rotation=60, ha="right", rotation_mode="anchor", fontsize=8)
     ax.set_yticks(range(n), ylabels, fontsize=7)
@@ -78,9 +77,8 @@ def pareto_figure(rows: tuple[ParetoRow, ...]):
     it; constrained layout keeps every label in the figure. A panel where no model has a
     positive finite error and time says so instead of drawing an empty log axis.
     """
-    import matplotlib.pyplot as plt  # deferred: heavy, figures only
-
-    fig, axes = plt.subplots(1, 2, figsize=(11, 4.6), sharey=True, layout="constrained")
+    fig = Figure(figsize=(11, 4.6), layout="constrained")
+    axes = fig.subplots(1, 2, sharey=True)
     y = np.array([r.median_loss for r in rows])
     drawn = False
     for ax, attr, front, label in (

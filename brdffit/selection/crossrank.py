@@ -28,7 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from brdffit.core.result import loss_kind
+from brdffit.core.result_terms import loss_kind
 from brdffit.errors import SweepError
 from brdffit.selection.families import FAMILIES
 from brdffit.selection.rank import LOSS_RTOL, rank_text, ranks

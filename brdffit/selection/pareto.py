@@ -10,7 +10,7 @@ model, the error is normalised per material instead: the median of ``loss / best
 on that material`` over each model's own materials.
 
 Per model and fitted metric: the median of the metric value (as the metric defines it
-and per sample, :func:`brdffit.core.result.per_sample`), of the relative error ``loss / best
+and per sample, :func:`brdffit.core.result_terms.per_sample`), of the relative error ``loss / best
 - 1``, of the fit wall time (s, the fit's own clock in the sweep worker, compile
 included on a worker's first fit, hence the median) and of the evaluation cost (ns per
 sample, warm jitted ``model.eval``; :mod:`brdffit.sweep.run`). A model is on the Pareto front
@@ -24,7 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from brdffit.core.result import loss_kind
+from brdffit.core.result_terms import loss_kind
 from brdffit.selection.crossrank import matrices
 from brdffit.selection.sweep_results import SweepResults
 from brdffit.util.text_table import render

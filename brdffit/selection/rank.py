@@ -18,12 +18,13 @@ that good, and ranking it last would hide a model that beat the others even unfi
 Only non-finite values (a failed fit) rank last, tied with each other.
 
 Losses: ``low_e1`` and ``low_e2`` are sums over samples; the table gives them per
-sample beside the sum (:func:`brdffit.core.result.per_sample`), the number to compare
+sample beside the sum (:func:`brdffit.core.result_terms.per_sample`), the number to compare
 between fits on different sub-grids.
 """
 
 from __future__ import annotations
 
+import html
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -31,7 +32,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from brdffit import models
-from brdffit.core.result import FitResult, loss_kind
+from brdffit.core.result import FitResult
+from brdffit.core.result_terms import loss_kind
 from brdffit.engine.fit import fit
 from brdffit.errors import ParameterError
 from brdffit.models import label
@@ -96,7 +98,7 @@ class RankRow:
     status: str = "CONVERGED"
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, repr=False)
 class Ranking:
     """Models fitted to one data set under one metric, best first by ``by``."""
 
@@ -107,7 +109,8 @@ class Ranking:
     rows: tuple[RankRow, ...]
 
     def table(self, fmt: str = "text") -> str:
-        """The ranking as a plain-text or Markdown (``fmt="markdown"``) table, or CSV."""
+        """The ranking as a plain-text, Markdown (``fmt="markdown"``) or HTML (``fmt="html"``:
+        a bold title, the table and the notes in small text) table, or CSV (the table only)."""
         head = [
             "rank",
             "model",
@@ -142,10 +145,38 @@ class Ranking:
         table = render(head, body, fmt)
         if fmt == "csv":
             return table
-        title = f"Ranking by {self.by} on {self.source} (metric {self.metric}, n = {self.n_data})"
+        title = self._title()
         if fmt == "markdown":
             return f"**{title}**\n\n{table}\n_{TIES} {PER_SAMPLE} {NOTE}_"
+        if fmt == "html":
+            notes = "<br>".join(html.escape(n) for n in (TIES, PER_SAMPLE, NOTE))
+            return (
+                f'<div class="brdffit-ranking">\n<p><b>{html.escape(title)}</b></p>\n'
+                f"{table}<p><small>{notes}</small></p>\n</div>"
+            )
         return f"{title}\n{table}{TIES}\n{PER_SAMPLE}\n{NOTE}"
+
+    def _title(self) -> str:
+        return f"Ranking by {self.by} on {self.source} (metric {self.metric}, n = {self.n_data})"
+
+    def _repr_html_(self) -> str:
+        """The ranking as HTML for Jupyter: :meth:`table` with ``fmt="html"``."""
+        return self.table("html")
+
+    def __str__(self) -> str:
+        return self.table()
+
+    def __repr__(self) -> str:
+        """One line: criterion, source, metric, the number of models and the first."""
+        best = self.rows[0].model if self.rows else "none"
+        return (
+            f"<Ranking by {self.by} on {self.source} ({self.metric}): "
+            f"{len(self.rows)} models, best {best}>"
+        )
+
+    def _repr_pretty_(self, p: object, cycle: bool) -> None:
+        """IPython's text form: the text table."""
+        p.text(repr(self) if cycle else self.table())
 
     def to_dict(self) -> dict:
         """JSON-ready form."""

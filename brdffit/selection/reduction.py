@@ -11,6 +11,7 @@ path as a table and names the features that were removed and those that survive
 from __future__ import annotations
 
 import dataclasses
+import html
 import json
 import math
 from dataclasses import dataclass
@@ -50,7 +51,7 @@ class PathRow:
     decision: str
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, repr=False)
 class Reduction:
     """What :func:`brdffit.simplify` found. Fields: ``path`` (rows in search order),
     ``chosen`` (label of the chosen variant, a spec every command accepts), ``result``
@@ -107,7 +108,8 @@ class Reduction:
         }  # fmt: skip
 
     def table(self, fmt: str = "text") -> str:
-        """The path as a plain-text or Markdown (``fmt="markdown"``) table, with the choice."""
+        """The path as a plain-text, Markdown (``fmt="markdown"``) or HTML (``fmt="html"``:
+        a bold title, the table, the choice in small text) table, with the choice."""
         cv = self.criterion == "cv"
         head = ["step", "variant", "change", "k", self.metric, "held-out" if cv else "BIC"]
         head += ["x best", "t", "decision"] if cv else ["decision"]
@@ -133,7 +135,30 @@ class Reduction:
         table = render(head, body, fmt)
         if fmt == "markdown":
             return f"**{title}**\n\n{table}\n\n{tail}"
+        if fmt == "html":
+            return (
+                f'<div class="brdffit-reduction">\n<p><b>{html.escape(title)}</b></p>\n'
+                f"{table}<p><small>{html.escape(tail)}</small></p>\n</div>"
+            )
         return f"{title}\n{table}\n{tail}"
+
+    def _repr_html_(self) -> str:
+        """The path as HTML for Jupyter: :meth:`table` with ``fmt="html"``."""
+        return self.table("html")
+
+    def __str__(self) -> str:
+        return self.table()
+
+    def __repr__(self) -> str:
+        """One line: start model, chosen variant, criterion, variants fitted."""
+        return (
+            f"<Reduction {self.full_label} -> {self.chosen} by {self.criterion} "
+            f"({len(self.path)} variants fitted)>"
+        )
+
+    def _repr_pretty_(self, p: object, cycle: bool) -> None:
+        """IPython's text form: the text table."""
+        p.text(repr(self) if cycle else self.table())
 
     def to_dict(self) -> dict:
         """JSON-ready form: :meth:`summary`, the settings, the path and both fits
@@ -163,7 +188,8 @@ class Reduction:
         crit = "BIC" if self.criterion == "bic" else f"held-out {self.metric}"
         ax.set_xlabel("free parameters")
         ax.set_ylabel(crit if y == "value" else f"{self.metric} (all data)")
-        ax.set_title(f"{self.full_label} on {self.source}", fontsize=9)
+        source = self.source.split(" (", 1)[0]  # the name; the path follows in brackets
+        ax.set_title(f"{self.full_label} on {source}", fontsize=9)
         ax.legend(fontsize=8)
         return ax
 

@@ -17,7 +17,7 @@ import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from brdffit.core.result import per_sample
+from brdffit.core.result_terms import per_sample
 from brdffit.errors import SweepError
 from brdffit.selection.families import family_of
 

@@ -1,7 +1,7 @@
 """Helpers with no BRDF in them, used by every layer above.
 
 - ``atomic``: atomic file writes (bytes, text, JSON, figures) and leftover temporaries.
-- ``text_table``: text and Markdown tables.
+- ``text_table``: text, Markdown, CSV and HTML tables.
 - ``progress``: the progress bar of long commands, on stderr.
 - ``jax_config``: JAX's 64-bit mode and the on-disk compilation cache.
 - ``version``: the installed distribution's version.

@@ -3,8 +3,15 @@
 from __future__ import annotations
 
 import sys
+import warnings
 
-from tqdm.auto import tqdm
+from tqdm import TqdmWarning
+
+with warnings.catch_warnings():
+    # In a Jupyter kernel without ipywidgets, tqdm.auto warns on import ("IProgress not
+    # found") and falls back to the text bar, which is the bar we want there anyway.
+    warnings.simplefilter("ignore", TqdmWarning)
+    from tqdm.auto import tqdm
 
 
 def progress_bar(total: int | None, desc: str, unit: str, enabled: bool = True):

@@ -20,7 +20,8 @@ def test_demo_writes_fits_posterior_report_and_exports(tmp_path):
     files = run_demo(
         tmp_path, stride=(9, 9, 15), n_steps=60, n_subsample=200, progress=False, log=lines.append
     )
-    for role in ("material", "fit_walter", "ranking", "posterior", "corner", "slices", "html"):
+    roles = ("material", "fit_walter", "ranking", "posterior", "corner", "traces", "predictive")
+    for role in (*roles, "slices", "html"):
         assert files[role].is_file() and files[role].stat().st_size > 0, role
     # The truth is walter: it must win the ranking, and its fit land near the truth.
     fit = json.loads(files["fit_walter"].read_text())

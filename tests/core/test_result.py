@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from brdffit import FitResult, Measurements, fit, models, rank, synthesize
-from brdffit.core.result import per_sample, value_text
+from brdffit.core.result_terms import per_sample, value_text
 from brdffit.engine import metrics as metrics_mod
 from brdffit.engine.objective import all_losses
 

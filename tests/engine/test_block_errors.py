@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from brdffit import Measurements, ParameterError, fit_many, models
-from brdffit.core.result import BLOCK_DEG
+from brdffit.core.result_terms import BLOCK_DEG
 from brdffit.engine.metrics import get_metric, keep_mask, prepare
 from brdffit.engine.objective import Objective, block_moments, natural_moments
 from brdffit.engine.uncertainty import block_covariance, block_index

@@ -148,8 +148,8 @@ def test_table_formats_and_bad_arguments():
     assert isinstance(rows[0], CheckRow)
     with pytest.raises(ParameterError, match="float16"):
         check_model(models.get("lambert"), "float16")
-    with pytest.raises(ParameterError, match="fmt='html'"):
-        format_table(rows, "html")
+    with pytest.raises(ParameterError, match="fmt='latex'"):
+        format_table(rows, "latex")
 
 
 def test_cli_check_lambert_prints_a_table_and_exits_0(capsys):

@@ -6,6 +6,7 @@ and level tick labels apart."""
 from __future__ import annotations
 
 import pytest
+from matplotlib.backends.backend_agg import FigureCanvasAgg
 
 from brdffit.report.selection_figures import pareto_figure, rank_matrix_figure
 from brdffit.selection.crossrank import material_order, matrices
@@ -18,8 +19,9 @@ def _texts_outside(fig) -> list[str]:
     """Texts (tick labels in view, axis labels, titles, annotations, colour-bar label)
     that leave the canvas, and level tick labels of one axis that overlap each other
     (the boxes of slanted labels overlap whatever their spacing)."""
-    fig.canvas.draw()
-    r = fig.canvas.get_renderer()
+    canvas = FigureCanvasAgg(fig)  # the figures are not registered with pyplot
+    canvas.draw()
+    r = canvas.get_renderer()
     box, bad = fig.bbox, []
 
     def out(b) -> bool:
@@ -80,7 +82,7 @@ def test_rank_matrix_labels_stay_inside_the_canvas(long_labels):
     fig = rank_matrix_figure(matrices(long_labels, "low_e2"))
     assert _texts_outside(fig) == []
     cbar = fig.axes[1]
-    label = cbar.yaxis.label.get_window_extent(fig.canvas.get_renderer())
+    label = cbar.yaxis.label.get_window_extent(FigureCanvasAgg(fig).get_renderer())
     assert label.height <= cbar.bbox.height  # the colour bar holds its label
 
 
