@@ -23,7 +23,14 @@ from brdffit import BrdffitError, MissingDependencyError
 ROOT = Path(__file__).resolve().parents[1]
 README = ROOT / "README.md"
 NOTEBOOKS = sorted((ROOT / "notebooks").glob("*.ipynb"))
-PUBLIC_PACKAGES = ("brdffit", "brdffit.models", "brdffit.export")
+PUBLIC_PACKAGES = (
+    "brdffit",
+    "brdffit.models",
+    "brdffit.export",
+    "brdffit.report",
+    "brdffit.selection",
+    "brdffit.sweep",
+)
 
 DOTTED = re.compile(r"(?<![\w.])brdffit(?:\.[A-Za-z_]\w*)+")
 FENCE = re.compile(r"^```(\w*)[^\n]*\n(.*?)^```", re.M | re.S)
@@ -90,20 +97,21 @@ def _readme_sources() -> list[tuple[str, str, str]]:
 
 
 def _notebook_sources() -> list[tuple[str, str, str]]:
+    """(where, kind, text) pieces of the notebooks: each markdown cell, and each
+    notebook's code cells as one program (a name imported in one cell is used in later
+    ones), IPython magics and shell lines left out."""
     out = []
     for path in NOTEBOOKS:
+        code = []
         for i, cell in enumerate(json.loads(path.read_text())["cells"]):
             src = cell["source"]
             src = "".join(src) if isinstance(src, list) else src
-            where = f"notebooks/{path.name} cell {i}"
             if cell["cell_type"] == "code":
-                # IPython magics and shell lines are not Python
-                src = "\n".join(
-                    "" if ln.lstrip().startswith(("%", "!")) else ln for ln in src.splitlines()
-                )
-                out.append((where, "code", src))
+                lines = src.splitlines()
+                code += ["" if ln.lstrip().startswith(("%", "!")) else ln for ln in lines]
             else:
-                out.append((where, "text", src))
+                out.append((f"notebooks/{path.name} cell {i}", "text", src))
+        out.append((f"notebooks/{path.name} (code)", "code", "\n".join(code)))
     return out
 
 
@@ -150,6 +158,28 @@ def test_notebook_names_resolve():
     assert "brdffit.fit" in named, "the notebooks' names were not found (parser broken?)"
     missing = _missing({n: w for n, w in named.items() if not _resolve(n)})
     assert not missing, "the notebooks name what brdffit lacks:\n  " + "\n  ".join(missing)
+
+
+def _public(dotted: str) -> bool:
+    """Whether ``dotted`` is a public name: ``package.name`` with ``name`` in the
+    ``__all__`` of one of :data:`PUBLIC_PACKAGES` (or that package itself), followed by
+    attributes of it (``brdffit.models.get``, ``brdffit.Posterior.samples``)."""
+    for package in PUBLIC_PACKAGES:
+        if dotted == package:
+            return True
+        if dotted.startswith(package + "."):
+            head = dotted[len(package) + 1 :].split(".")[0]
+            if head in getattr(importlib.import_module(package), "__all__", ()):
+                return True
+    return False
+
+
+def test_notebooks_use_public_names_only():
+    """What a notebook imports or calls from brdffit is in a public package's ``__all__``:
+    a user copies notebook code, so it must not lean on internal modules."""
+    named = {n: w for n, w in _named(_notebook_sources()).items() if n.startswith("brdffit")}
+    inner = _missing({n: w for n, w in named.items() if not _public(n)})
+    assert not inner, "the notebooks use internal names:\n  " + "\n  ".join(inner)
 
 
 def test_console_scripts_resolve_to_callables():
