@@ -25,6 +25,7 @@ from collections.abc import Sequence
 import jax.numpy as jnp
 import matplotlib
 import numpy as np
+from matplotlib.colors import ListedColormap
 from matplotlib.figure import Figure
 
 from brdffit import models
@@ -50,6 +51,11 @@ INVALID_RGBA = (1.0, 0.0, 1.0, 1.0)
 """Magenta: pixels with no data at all."""
 UNMEASURED_RGBA = (0.75, 0.75, 0.75, 1.0)
 """Grey: difference pixels whose data rest on unmeasured bins (filled for display only)."""
+NONPOSITIVE_COLOUR = "#ff7f0e"
+"""Orange: cells measured at or below 0, which a log scale cannot place (measurement
+noise around 0 near a peak, or a calibration offset); they are data, never "not
+measured"."""
+NONPOSITIVE_LABEL = "measured <= 0"
 
 
 # --------------------------------------------------------------------------- sphere
@@ -153,7 +159,8 @@ def polar_figure(
 
     One panel per incidence angle; lines: the fit (``model.eval`` at
     :func:`~brdffit.report.render.in_plane_directions`), dots: the data by nearest bin (missing
-    bins left out). Log y axis; the dotted line marks the mirror direction.
+    bins left out; data measured at or below 0 as orange triangles on the axis floor,
+    :func:`mark_nonpositive`). Log y axis; the dotted line marks the mirror direction.
     """
     _, f_model = model_brdf(fit)
     theta_o = np.linspace(-89.0, 89.0, n_angles)
@@ -169,13 +176,15 @@ def polar_figure(
             ax.semilogy(
                 theta_o[ok], f_data[ok, c], ".", color=colour, ms=2.5, label=f"data {'RGB'[c]}"
             )
+        low = np.isfinite(f_data) & (f_data <= 0) & (np.abs(theta_o) < 90)[:, None]
+        mark_nonpositive(ax, [theta_o[low[:, c]] for c in range(3)])
         ax.axvline(ti, color="0.5", lw=0.8, ls=":")
         ax.set_title(f"theta_i = {ti:g} deg", fontsize=9)
         ax.set_xlabel("theta_o (deg), + = specular side")
         ax.set_xlim(-90, 90)
         ax.set_xticks([-90, -60, -30, 0, 30, 60, 90])
     axes[0, 0].set_ylabel("f in the plane of incidence (1/sr)")
-    fig.legend(*axes[0, 0].get_legend_handles_labels(), loc="outside right upper", fontsize=8)
+    fig.legend(*_legend_entries(axes[0]), loc="outside right upper", fontsize=8)
     fig.suptitle(f"{_name(fit)} on {_short(data.source)}: in-plane BRDF (phi_d = 0)", fontsize=10)
     return fig
 
@@ -190,10 +199,10 @@ def halfdiff_figure(
 
     The slice is the data's ``phi_d`` bin nearest ``phi_d_deg`` (the actual value is in
     the title); the fit is evaluated at the same bin-centre directions. theta_h runs on
-    MERL's square-root axis (bin index), labelled in degrees. Grey: not measured (or a
-    value <= 0, which has no logarithm). ``channel`` None shows the channel with the
-    largest RMS ``ln(data / fit)`` over the slice, and the title gives all three, so a
-    colour error shows even where the luminance fits.
+    MERL's square-root axis (bin index), labelled in degrees. Grey: not measured; orange:
+    measured at or below 0 (no logarithm; counted in the title). ``channel`` None shows
+    the channel with the largest RMS ``ln(data / fit)`` over the slice, and the title
+    gives all three, so a colour error shows even where the luminance fits.
     """
     _, f_model = model_brdf(fit)
     stride = merl_stride(data)
@@ -211,6 +220,7 @@ def halfdiff_figure(
     f_data = f_all[:, channel].reshape(shape[:2])
     f_fit = fit_all[:, channel].reshape(shape[:2])
     ratio = ratios[:, channel].reshape(shape[:2])
+    nonpositive = (f_data <= 0).T  # measured (f_all is NaN where not), but no logarithm
     with np.errstate(divide="ignore", invalid="ignore"):
         log_data, log_fit = np.log10(f_data), np.log10(f_fit)
     u_edges = np.arange(shape[0] + 1) * stride[0] / MERL_SHAPE[0]  # u = sqrt(theta_h / 90 deg)
@@ -233,14 +243,19 @@ def halfdiff_figure(
             u_edges, td_edges, np.ma.masked_invalid(img).T, cmap=cm, vmin=vmin, vmax=vmax
         )
         fig.colorbar(mesh, ax=ax, label=label, shrink=0.9)
+        if title != "fit" and nonpositive.any():
+            ax.pcolormesh(u_edges, td_edges, np.ma.masked_where(~nonpositive, nonpositive),
+                          cmap=ListedColormap([NONPOSITIVE_COLOUR]))  # fmt: skip
         ax.set_xticks(np.sqrt(deg_ticks / 90.0), [f"{t:g}" for t in deg_ticks])
         ax.set_xlabel("theta_h (deg, square-root axis)")
         ax.set_title(title, fontsize=9)
     axes[0].set_ylabel("theta_d (deg)")
     per = ", ".join(f"{c} {v:.3f}" for c, v in zip("RGB", rms, strict=True))
+    n_low = int(nonpositive.sum())
+    low = f"; orange: {n_low} cells {NONPOSITIVE_LABEL}" if n_low else ""
     fig.suptitle(
         f"{_name(fit)} on {_short(data.source)}: channel {'RGB'[channel]}, slice phi_d = "
-        f"{np.rad2deg(pd_axis[k]):.1f} deg; grey: not measured\n"
+        f"{np.rad2deg(pd_axis[k]):.1f} deg; grey: not measured{low}\n"
         f"RMS ln(data / fit) over the slice: {per}",
         fontsize=10,
     )
@@ -261,7 +276,8 @@ def plot_slices(
     """``f cos(theta_i)`` against ``theta_h`` at a few ``theta_d``, data dots and model lines.
 
     The samples nearest to each (theta_d, phi_d) line are taken from ``data`` (valid
-    samples only, :func:`brdffit.report.render.slice_indices`); the y axis is logarithmic.
+    samples only, :func:`brdffit.report.render.slice_indices`); the y axis is logarithmic,
+    and data measured at or below 0 are orange triangles on its floor (:func:`mark_nonpositive`).
     """
     fig = Figure(figsize=(4.2 * len(theta_d_deg), 3.6), layout="constrained")
     axes = fig.subplots(1, len(theta_d_deg), sharey=True, squeeze=False)
@@ -269,7 +285,9 @@ def plot_slices(
         idx, near_td, near_pd = slice_indices(data, t, phi_d_deg)
         th = np.rad2deg(data.theta_h[idx])
         cos_i = data.wi[idx, 2]
-        ax.semilogy(th, data.values[idx, channel] * cos_i, ".", color="k", ms=3, label="data")
+        y = data.values[idx, channel] * cos_i
+        ax.semilogy(th, y, ".", color="k", ms=3, label="data")
+        mark_nonpositive(ax, [th[y <= 0]])
         for r in results:
             m = models.model_of(r)
             f = np.asarray(
@@ -283,6 +301,29 @@ def plot_slices(
     axes[0][0].set_ylabel(f"f cos theta_i, channel {'RGB'[channel]} (1/sr)")
     axes[0][-1].legend(fontsize=7)
     return fig
+
+
+def mark_nonpositive(ax, xs: Sequence[np.ndarray]) -> None:
+    """Data measured at or below 0 on a log-y axis: orange triangles on the axis floor at
+    each x of ``xs`` (one array per series), labelled once, so that no measured value
+    vanishes from a log plot. The floor is the lower y limit after the other data."""
+    x = np.concatenate([np.asarray(v, float) for v in xs]) if len(xs) else np.zeros(0)
+    if x.size == 0:
+        return
+    ax.autoscale_view()
+    floor = ax.get_ylim()[0]
+    ax.plot(x, np.full(x.size, floor), "v", color=NONPOSITIVE_COLOUR, ms=4, clip_on=False,
+            label=f"{NONPOSITIVE_LABEL} (at the floor)")  # fmt: skip
+    ax.set_ylim(bottom=floor)
+
+
+def _legend_entries(axes) -> tuple[list, list]:
+    """Legend handles and labels of all ``axes``, each label once (first axes first)."""
+    out: dict[str, object] = {}
+    for ax in axes:
+        for h, lab in zip(*ax.get_legend_handles_labels(), strict=True):
+            out.setdefault(lab, h)
+    return list(out.values()), list(out)
 
 
 def _name(fit: Fit) -> str:

@@ -230,14 +230,17 @@ def fit_html(
                 figures.polar_figure(result, data),
                 "in-plane BRDF",
                 "In-plane BRDF f (1/sr, no cosine) against the viewing angle at several "
-                "incidence angles: lines the fit, dots the data (nearest bin).",
+                "incidence angles: lines the fit, dots the data (nearest bin); data "
+                "measured at or below 0, which a log axis cannot place, are orange "
+                "triangles on the axis floor.",
             ),
             _figure(
                 figures.halfdiff_figure(result, data),
                 "theta_h x theta_d images",
                 "log10 f of data and fit over theta_h (square-root axis) and theta_d at "
                 "phi_d near 90 deg, and ln(data / fit), for the channel the fit misses "
-                "most (the title gives all three).",
+                "most (the title gives all three). Grey: not measured; orange: measured at "
+                "or below 0 (no logarithm; the title counts them).",
             ),
         ]
     except MeasurementsError as e:

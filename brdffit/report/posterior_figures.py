@@ -40,6 +40,7 @@ from brdffit import models
 from brdffit.core.measurements import Measurements
 from brdffit.core.result import FitResult
 from brdffit.engine.posterior import Posterior
+from brdffit.report.figures import mark_nonpositive
 from brdffit.report.render import slice_indices
 
 Z95 = 1.959963984540054
@@ -343,6 +344,7 @@ def _slice_panels(top, ratio, c: dict, cos_i: np.ndarray) -> float | None:
         ax.plot(th, y * scale, ".", color="k", ms=3, label="data")
         ax.tick_params(labelsize=7)
     top.set_yscale("log")
+    mark_nonpositive(top, [th[y <= 0]])
     return share
 
 

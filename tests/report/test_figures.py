@@ -243,3 +243,45 @@ def test_halfdiff_of_data_from_the_model_has_zero_log_ratio(walter_data):
     assert np.allclose(data_img.reshape(18, 18).T[ok], np.log10(cube[:, :, k][ok]))
     _labels_inside(fig)
     plt.close(fig)
+
+
+def _with_nonpositive(data: Measurements, channel: int = 1) -> tuple[Measurements, np.ndarray]:
+    """``data`` with its measured ``channel`` at or below 0 (alternately 0 and -0.05 1/sr)
+    in every other bin near the peak (theta_h < 8 deg), as measured noise around 0 is."""
+    v = data.values.copy()
+    idx = np.flatnonzero(data.valid & (data.theta_h < np.deg2rad(8.0)))[::2]
+    v[idx, channel] = np.where(np.arange(idx.size) % 2, 0.0, -0.05)
+    return data.replace(values=v), idx
+
+
+def test_values_measured_at_or_below_zero_are_drawn_as_measured(walter_data):
+    """A log scale cannot place them: they are marked (orange), counted, never grey."""
+    data, idx = _with_nonpositive(walter_data)
+    fig = halfdiff_figure(WALTER, data, channel=1)
+    shape = (18, 18, 36)
+    k = np.argmin(np.abs(np.rad2deg(data.phi_d.reshape(shape)[0, 0]) - 90))
+    low = np.zeros(data.n, bool)
+    low[idx] = True
+    want = low.reshape(shape)[:, :, k].T  # (theta_d, theta_h), the image's orientation
+    panels = [ax for ax in fig.axes if ax.get_label() != "<colorbar>"]
+    for ax, marked in zip(panels, (True, False, True), strict=True):  # data, fit, ratio
+        overlays = ax.collections[1:]
+        if not marked:
+            assert not overlays
+            continue
+        (overlay,) = overlays
+        got = ~np.ma.getmaskarray(overlay.get_array()).reshape(want.shape)
+        np.testing.assert_array_equal(got, want)
+    assert f"orange: {int(want.sum())} cells measured <= 0" in fig._suptitle.get_text()
+    assert want.sum() > 0
+    plt.close(fig)
+
+    fig = polar_figure(WALTER, data, incidence_deg=(30.0,))
+    ax = next(ax for ax in fig.axes if ax.get_lines())
+    wi, wo = in_plane_directions(30.0, np.linspace(-89.0, 89.0, 179))
+    ref = nearest_bin(data, wi, wo)
+    n_low = int((np.isfinite(ref) & (ref <= 0)).sum())
+    (marks,) = [ln for ln in ax.get_lines() if ln.get_label().startswith("measured <= 0")]
+    assert n_low > 0 and len(marks.get_xdata()) == n_low
+    assert np.all(marks.get_ydata() == ax.get_ylim()[0])  # on the axis floor, in view
+    plt.close(fig)
