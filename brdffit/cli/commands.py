@@ -140,14 +140,16 @@ def cmd_fit(args) -> None:
     print(r.report())
     if args.json:
         _write(args.json, r.to_json())
+    written = []
     if args.export:
         prefix = args.export_prefix or default_prefix(args.file, args.json, label(model))
-        for e, paths in write_exports(r, args.export, prefix):
+        written = write_exports(r, args.export, prefix)
+        for e, paths in written:
             print(f"export {e.summary()} -> {', '.join(str(p) for p in paths)}")
         if note := render_note(r.metric):
             print(f"note: {note}")
     if args.report:
-        write_fit_html(args.report, r, data)
+        write_fit_html(args.report, r, data, exports=written)
 
 
 def _say(text: str) -> None:

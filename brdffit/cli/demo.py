@@ -112,10 +112,11 @@ def run_demo(
     files["slices"] = out / "slices.png"
     save_figure(plot_slices(fit_data, results), files["slices"], dpi=90)
 
-    files["html"] = write_fit_html(out / "report.html", best, fit_data)
-    for e, paths in write_exports(best, ("mitsuba", "gltf"), out / f"material.{best.model}"):
+    written = write_exports(best, ("mitsuba", "gltf"), out / f"material.{best.model}")
+    for e, paths in written:
         log(f"export {e.summary()} -> {', '.join(p.name for p in paths)}")
         files.update({f"export_{p.name.split('.', 2)[-1]}": p for p in paths})
+    files["html"] = write_fit_html(out / "report.html", best, fit_data, exports=written)
 
     files["report"] = out / "report.txt"
     parts = [f"brdffit demo ({time.perf_counter() - t0:.1f} s)", f"truth (walter): {TRUTH}", ""]

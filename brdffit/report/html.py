@@ -31,6 +31,8 @@ from brdffit.core.measurements import Measurements
 from brdffit.core.result import FitResult
 from brdffit.core.result_terms import errors_assumed
 from brdffit.errors import MeasurementsError
+from brdffit.export import ERROR_DEFINITION, Export
+from brdffit.report import figures
 from brdffit.report.sweep_sections import metric_sections, read_sweep
 from brdffit.selection.rank import NOTE, TIES
 from brdffit.selection.survival import survival_table
@@ -198,11 +200,14 @@ def _fit_statistics(result: FitResult) -> list[list[str]]:
 
 
 def fit_html(
-    result: FitResult, data: Measurements, *, title: str | None = None, sphere_size: int = 128
+    result: FitResult,
+    data: Measurements,
+    *,
+    title: str | None = None,
+    sphere_size: int = 128,
+    exports: Sequence[tuple[Export, Sequence[Path]]] = (),
 ) -> str:
     """The HTML text of :func:`write_fit_html` (arguments there)."""
-    from brdffit.report import figures  # deferred: imports matplotlib
-
     source = result.source.split(" (", 1)[0]  # readers describe a path as "NAME (PATH)"
     title = title or f"brdffit: {result.model} fitted to {Path(source).name or source}"
     body = [f"<h1>{html.escape(title)}</h1>", "<h2>Fit</h2>"]
@@ -245,9 +250,36 @@ def fit_html(
         ]
     except MeasurementsError as e:
         body.append(f'<p class="note">No figures: {html.escape(str(e))}</p>')
+    if exports:
+        body += _export_section(exports)
     body += ["<h2>Data</h2>", f"<pre>{html.escape(data.summary())}</pre>"]
     body += ["<h2>Text report</h2>", f"<pre>{html.escape(result.report())}</pre>"]
     return _page(title, body)
+
+
+def _export_section(exports: Sequence[tuple[Export, Sequence[Path]]]) -> list[str]:
+    """The exports written beside the report: per target what was written, whether it is
+    exact, its measured errors (:data:`brdffit.export.ERROR_DEFINITION`), the files,
+    and each export's notes (what the target could not hold)."""
+    head = ["target", "written as", "mapping", "rel. RMS error", "log error", "albedo error",
+            "files"]  # fmt: skip
+    rows = [
+        [
+            e.target,
+            e.target_model,
+            "exact" if e.exact else "approximate" + (" (fitted)" if e.fitted else ""),
+            _fmt(e.error, ".3g"),
+            _fmt(e.log_error, ".3g"),
+            _fmt(e.albedo_error, ".3g"),
+            ", ".join(Path(p).name for p in paths),
+        ]
+        for e, paths in exports
+    ]
+    out = ["<h2>Exports</h2>", html_table(head, rows)]
+    out.append(f'<p class="note">{html.escape(ERROR_DEFINITION)}</p>')
+    for e, _ in exports:
+        out += [f'<p class="note">{html.escape(e.target)}: {html.escape(n)}</p>' for n in e.notes]
+    return out
 
 
 def write_fit_html(
@@ -257,6 +289,7 @@ def write_fit_html(
     *,
     title: str | None = None,
     sphere_size: int = 128,
+    exports: Sequence[tuple[Export, Sequence[Path]]] = (),
 ) -> Path:
     """Write the one-file HTML report of a fit, atomically; returns its path.
 
@@ -266,13 +299,17 @@ def write_fit_html(
       on the MERL grid or a strided sub-grid, else the report says why they are missing).
     - ``title``: page heading (default: model and data file).
     - ``sphere_size``: pixels per sphere side (:func:`brdffit.report.figures.sphere_figure`).
+    - ``exports``: what :func:`brdffit.export.write_exports` returned for this fit, shown
+      in an "Exports" section (target, form written, exact or not, errors, file names,
+      notes).
 
     Raises ``OSError`` naming ``path`` when it cannot be written.
     """
     folder = Path(path).parent
     if not folder.is_dir():  # say so before the figures are drawn
         raise OSError(f"{path}: cannot be written: no folder {folder}")
-    return _write(path, fit_html(result, data, title=title, sphere_size=sphere_size))
+    page = fit_html(result, data, title=title, sphere_size=sphere_size, exports=exports)
+    return _write(path, page)
 
 
 # --------------------------------------------------------------------------- a sweep

@@ -14,6 +14,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 import pytest
 
+import brdffit
 from brdffit import FitResult, models, synthesize, write_fit_html, write_sweep_html
 from brdffit.cli import main
 from brdffit.io.merl import MERL_SCALES
@@ -229,3 +230,21 @@ def test_flags_column_names_scalars_at_a_bound(tmp_path, lambert_data):
     cells = [t.strip() for t in p.text if t.strip()]
     row = cells[cells.index("kd[g]") : cells.index("kd[g]") + 6]
     assert row[-1].startswith("at bound"), row
+
+
+def test_the_fit_page_names_the_exports_their_files_and_errors(tmp_path, lambert_data):
+    """The exports written beside a fit are in its report: target, form, exactness,
+    the three measured errors and the file names, as the export itself gives them."""
+    result = brdffit.fit(models.get("lambert"), lambert_data, "ngan", n_restarts=0)
+    written = brdffit.write_exports(result, ["mitsuba", "gltf"], tmp_path / "mat")
+    p = _parse(write_fit_html(tmp_path / "r.html", result, lambert_data, sphere_size=16,
+                              exports=written))  # fmt: skip
+    text = " ".join(p.text)
+    assert "Exports" in text
+    for e, paths in written:
+        for part in (e.target, e.target_model, f"{e.error:.3g}", f"{e.albedo_error:.3g}"):
+            assert part in text, (e.target, part)
+        assert ("exact" if e.exact else "approximate") in text
+        for path in paths:
+            assert path.name in text and path.is_file()
+    assert "relative RMS of f cos(theta_i)" in text  # what the errors are
