@@ -75,7 +75,7 @@ class MaskCounts:
         cut = f"{self.zenith_cut_deg:g} deg " if self.zenith_cut_deg is not None else ""
         reasons = [
             (self.below_horizon, "below the horizon"),
-            (self.outside_cut, f"outside the {cut}zenith cut (not evaluated)"),
+            (self.outside_cut, f"outside the reader's {cut}zenith cut (not evaluated)"),
             (self.no_channel, "with no channel measured"),
             (self.other, "masked by the reader for another reason"),
         ]

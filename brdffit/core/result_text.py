@@ -98,7 +98,11 @@ def statistics(r: FitResult) -> list[tuple[str, str]]:
     """The fit's header as (name, text) pairs: the metric's value as computed and per
     sample, the other metrics, noise model, status, steps, wall time, samples, AIC/BIC
     and the condition number."""
-    cut = "no angle cut" if r.cut_deg is None else f"theta_i, theta_o < {r.cut_deg:g} deg"
+    cut = (
+        "no fit angle cut"
+        if r.cut_deg is None
+        else f"fit's angle cut: theta_i, theta_o < {r.cut_deg:g} deg"
+    )
     others = ", ".join(
         f"{k} {loss_text(k, v, r.n_samples)}" for k, v in r.losses.items() if k != r.metric
     )

@@ -249,8 +249,8 @@ def _note(header: RglFile, n: int, above, inside, grazing_deg: float) -> str:
     parts = [
         f"RGL {kind} '{header.description}'",
         f"theta_i nodes {t[0]:.3g}-{t[-1]:.3g} deg" if t else "no theta_i nodes",
-        f"{int(above.sum() - inside.sum()):,} of {n:,} samples beyond the {grazing_deg:g} deg "
-        "zenith cut, not evaluated",
+        f"{int(above.sum() - inside.sum()):,} of {n:,} samples beyond the reader's "
+        f"{grazing_deg:g} deg zenith cut, not evaluated",
     ]
     return f"{header.path} ({'; '.join(parts)})"
 

@@ -56,6 +56,13 @@ NONPOSITIVE_COLOUR = "#ff7f0e"
 noise around 0 near a peak, or a calibration offset); they are data, never "not
 measured"."""
 NONPOSITIVE_LABEL = "measured <= 0"
+HORIZON_NOTE = (
+    "environment: bright sky above, dark ground below; the band across each sphere's "
+    "middle is the horizon, not a seam"
+)
+"""In the sphere figure's title: the change across the environment spheres' equator is
+the environment's horizon (:class:`~brdffit.report.render.Environment`), seen by the
+normals that face it, not a seam in the rendering."""
 
 
 # --------------------------------------------------------------------------- sphere
@@ -89,7 +96,8 @@ def sphere_figure(
     grey where the data were not measured (under the environment: more than 5% of a
     pixel's cosine weight on unmeasured bins). Under each difference: the mean colour
     ratio data / fit per channel over the measured pixels, the tint a grey difference
-    would hide.
+    would hide. The title says what the band across the environment spheres is
+    (:data:`HORIZON_NOTE`).
 
     Arguments:
     - ``fit``: a :class:`FitResult` or ``(model, params)``; ``data``: MERL-grid measurements.
@@ -131,7 +139,8 @@ def sphere_figure(
             va="top",
         )
     fig.suptitle(
-        f"{_name(fit)} on {_short(data.source)}; grey: not measured (data shown filled)",
+        f"{_name(fit)} on {_short(data.source)}; grey: not measured (data shown filled)\n"
+        f"{HORIZON_NOTE}",
         fontsize=10,
     )
     return fig

@@ -189,7 +189,7 @@ def _fit_statistics(result: FitResult) -> list[list[str]]:
         ["data", result.source],
         [f"metric {result.metric}", _fmt(result.loss)],
         ["other metrics (same samples)", others or "none"],
-        ["angle cut", cut],
+        ["fit's angle cut", cut],
         ["noise model", errors_assumed(result.errors_method, result.error_blocks)],
         ["status", result.status.value],
         ["steps", f"{result.n_steps} (best of {result.n_starts} starts)"],
@@ -228,8 +228,10 @@ def fit_html(
                 "nearest measured one) and from the fit, and their colour difference "
                 "(CIEDE2000 as displayed; grey where the data were not measured; below it "
                 "the mean colour ratio data / fit per channel), under a distant point "
-                "light (top) and a sky/ground environment (bottom). Tone map: exposure as "
-                "printed, clipped, sRGB transfer curve.",
+                "light (top) and a sky/ground environment (bottom: bright sky above, dark "
+                "ground below, so the band across each sphere's middle is the horizon the "
+                "normals there face, not a seam). Tone map: exposure as printed, clipped, "
+                "sRGB transfer curve.",
             ),
             _figure(
                 figures.polar_figure(result, data),

@@ -129,7 +129,10 @@ def test_merl_grid_cells_weights_and_masked_counts(files):
     np.testing.assert_array_equal(data.valid, inside)
     assert np.all(data.values[g.above & ~inside] == -1.0) and np.all(data.values[~g.above] == 0)
     n_cut = int(g.above.sum() - inside.sum())
-    assert n_cut > 0 and f"{n_cut:,} of {g.n:,} samples beyond the 85 deg zenith cut" in data.source
+    assert (
+        n_cut > 0
+        and f"{n_cut:,} of {g.n:,} samples beyond the reader's 85 deg zenith cut" in data.source
+    )
     expected = fx.linear_fcos(g.wi[inside], g.wo[inside]) / g.wo[inside, 2:3]
     np.testing.assert_allclose(data.values[inside], expected, rtol=F32)
 
@@ -199,6 +202,12 @@ def test_cli_info_fit_and_sweep_listing_on_a_bsdf(files, tmp_path, capsys):
     js = tmp_path / "fit.json"
     argv = ["fit", str(path), "--model", "lambert", "--stride", "9", "9", "9", "--json", str(js)]
     assert main(argv) == 0
+    # two cuts, each named by its owner wherever it is printed: the reader's (the file's
+    # data end at 85 deg) and the fit's (the metric's samples end at 80 deg)
+    out = capsys.readouterr().out
+    assert "the reader's 85 deg zenith cut" in out
+    assert "fit's angle cut: theta_i, theta_o < 80 deg" in out
+    assert out.count("zenith cut") == out.count("reader's 85 deg zenith cut")
     kd = json.loads(js.read_text())["params"]["kd"]
     with capsys.disabled():
         print("kd fitted:", kd)
@@ -242,7 +251,7 @@ def test_negative_channels_are_measured_values_kept_and_fitted(tmp_path):
     counts = data.mask_counts()
     assert counts.outside_cut == int((g.above & ~inside).sum()) and counts.no_channel == 0
     assert counts.channels_masked == (0, 0, 0)
-    assert "outside the 85 deg zenith cut" in counts.text()
+    assert "outside the reader's 85 deg zenith cut" in counts.text()
     for metric in ("low_e2", "ngan"):
         kd = np.asarray(brdffit.fit(models.get("lambert"), data, metric=metric).params["kd"])
         np.testing.assert_allclose(kd[:2], albedo[:2], rtol=0.01)  # as the grey file above

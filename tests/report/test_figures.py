@@ -285,3 +285,11 @@ def test_values_measured_at_or_below_zero_are_drawn_as_measured(walter_data):
     assert n_low > 0 and len(marks.get_xdata()) == n_low
     assert np.all(marks.get_ydata() == ax.get_ylim()[0])  # on the axis floor, in view
     plt.close(fig)
+
+
+def test_the_environment_spheres_say_what_the_band_across_them_is(lambert_data):
+    """The sky/ground horizon crosses every environment sphere; unexplained, it reads as a
+    rendering seam. The figure's title says what it is."""
+    fig = sphere_figure(LAMBERT, lambert_data, size=16)
+    assert "the band across each sphere's middle is the horizon" in fig._suptitle.get_text()
+    plt.close(fig)
