@@ -290,13 +290,14 @@ def plot_slices(
     """
     fig = Figure(figsize=(4.2 * len(theta_d_deg), 3.6), layout="constrained")
     axes = fig.subplots(1, len(theta_d_deg), sharey=True, squeeze=False)
+    lows = []
     for ax, t in zip(axes[0], theta_d_deg, strict=True):
         idx, near_td, near_pd = slice_indices(data, t, phi_d_deg)
         th = np.rad2deg(data.theta_h[idx])
         cos_i = data.wi[idx, 2]
         y = data.values[idx, channel] * cos_i
         ax.semilogy(th, y, ".", color="k", ms=3, label="data")
-        mark_nonpositive(ax, [th[y <= 0]])
+        lows.append((ax, th[y <= 0]))
         for r in results:
             m = models.model_of(r)
             f = np.asarray(
@@ -307,6 +308,8 @@ def plot_slices(
             )
         ax.set_title(f"theta_d = {near_td:.1f} deg, phi_d = {near_pd:.0f} deg")
         ax.set_xlabel("theta_h (deg)")
+    for ax, x in lows:  # after every line: the shared floor is final
+        mark_nonpositive(ax, [x])
     axes[0][0].set_ylabel(f"f cos theta_i, channel {'RGB'[channel]} (1/sr)")
     axes[0][-1].legend(fontsize=7)
     return fig

@@ -16,7 +16,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from brdffit import Measurements, MeasurementsError, models, synthesize
 from brdffit.core.geometry import io_to_halfdiff, merl_indices
 from brdffit.io.merl_grid import lookup, merl_grid, merl_grid_measurements, merl_subgrid
-from brdffit.report.figures import halfdiff_figure, polar_figure, sphere_figure
+from brdffit.report.figures import halfdiff_figure, plot_slices, polar_figure, sphere_figure
 from brdffit.report.render import (
     DEFAULT_LIGHT,
     Environment,
@@ -25,6 +25,7 @@ from brdffit.report.render import (
     model_brdf,
     nearest_bin,
     render_sphere,
+    slice_indices,
     sphere_images,
     sphere_normals,
     tonemap,
@@ -284,6 +285,17 @@ def test_values_measured_at_or_below_zero_are_drawn_as_measured(walter_data):
     (marks,) = [ln for ln in ax.get_lines() if ln.get_label().startswith("measured <= 0")]
     assert n_low > 0 and len(marks.get_xdata()) == n_low
     assert np.all(marks.get_ydata() == ax.get_ylim()[0])  # on the axis floor, in view
+    plt.close(fig)
+
+    td, pd = np.rad2deg(data.theta_d[idx[0]]), np.rad2deg(data.phi_d[idx[0]])  # a low cell
+    fig = plot_slices(data, [], theta_d_deg=(td, 60.0), phi_d_deg=pd, channel=1)
+    for ax, t in zip(fig.axes, (td, 60.0), strict=True):
+        sel, _, _ = slice_indices(data, t, pd)
+        n_low = int((data.values[sel, 1] <= 0).sum())
+        marks = [ln for ln in ax.get_lines() if ln.get_label().startswith("measured <= 0")]
+        got = len(marks[0].get_xdata()) if marks else 0
+        assert got == n_low and (t != td or n_low > 0), (t, got, n_low)
+        assert not marks or np.all(marks[0].get_ydata() == ax.get_ylim()[0])
     plt.close(fig)
 
 
