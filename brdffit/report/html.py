@@ -60,12 +60,10 @@ pre { background: #f6f6f6; padding: 0.6em; font-size: 12px; white-space: pre-wra
 
 
 def png_data_uri(fig: object, dpi: int = 90) -> str:
-    """A matplotlib figure as a ``data:image/png;base64,...`` URI (closed if pyplot has it)."""
-    import matplotlib.pyplot as plt  # deferred: heavy, figures only
-
+    """A matplotlib figure as a ``data:image/png;base64,...`` URI. The report's figures are
+    not registered with pyplot (:mod:`brdffit.report.figures`): nothing to close."""
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=dpi, bbox_inches="tight", pad_inches=0.1)
-    plt.close(fig)
     return "data:image/png;base64," + base64.b64encode(buf.getvalue()).decode("ascii")
 
 

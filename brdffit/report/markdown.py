@@ -121,13 +121,9 @@ def write_report(
     ``families`` is a ``material,family`` CSV file whose families replace the recorded
     ones. Raises :class:`brdffit.errors.SweepError` if the folder holds no
     ``sweep.json`` or the families file is not usable. Figures are saved with a tight
-    bounding box, so no label is cut off.
+    bounding box, so no label is cut off; matplotlib's backend is left as it is (in
+    Jupyter, figures drawn after it still show inline).
     """
-    import matplotlib  # deferred: heavy, figures only
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt  # deferred: heavy, figures only
-
     res = read_sweep(sweep_dir, families)
     out = Path(sweep_dir) / "report"
     out.mkdir(parents=True, exist_ok=True)
@@ -141,7 +137,6 @@ def write_report(
         for fig, name in ((sec.rank_matrix, "rank_matrix"), (sec.pareto_plot, "pareto")):
             if fig is not None:
                 save_figure(fig, out / f"{name}_{metric}.png", **SAVE)
-                plt.close(fig)
         lines += [
             f"## Metric `{metric}`",
             "",

@@ -62,7 +62,7 @@ class MetricSection:
     :func:`~brdffit.selection.pareto.pareto_table`; ``caption``: which materials the
     Pareto medians are over; ``n_rows``: the per-material table's rows (inline when at
     most :data:`MAX_INLINE_ROWS`); ``rank_matrix`` and ``pareto_plot``: matplotlib
-    figures (pyplot's, the writer closes them) or ``None``, then ``rank_matrix_note`` or
+    figures (not registered with pyplot: nothing to close) or ``None``, then ``rank_matrix_note`` or
     ``pareto_note`` says why there is none.
     """
 

@@ -4,8 +4,8 @@
 chosen variant's label and fit, the start model's fit and the settings; it prints the
 path as a table and names the features that were removed and those that survive
 (:func:`brdffit.selection.variants.features`).
-:meth:`Reduction.plot` draws the criterion against the parameter count (as
-:meth:`brdffit.Posterior.corner` draws a posterior: a result plots itself).
+:meth:`Reduction.plot` draws the criterion against the parameter count on axes (an
+axes-level method, as pandas' ``.plot``).
 """
 
 from __future__ import annotations

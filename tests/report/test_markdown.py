@@ -7,6 +7,7 @@ import json
 import re
 import shutil
 
+import matplotlib
 import pytest
 
 from brdffit.cli import main
@@ -145,3 +146,15 @@ def test_report_with_too_few_results_for_a_figure_says_so(tmp_path, capsys):
     assert not list((root / "report").glob("*.png"))
     page = (root / "report.html").read_text()
     assert "No rank matrix" in page and "No Pareto plot" in page
+
+
+def test_writing_a_report_leaves_matplotlibs_backend_alone(tmp_path):
+    """In Jupyter the backend is the kernel's inline one; a report written there must not
+    switch it (it once forced Agg, and no later figure showed)."""
+    before = matplotlib.get_backend()
+    matplotlib.use("pdf")  # stands for the kernel's backend
+    try:
+        write_report(make_sweep(tmp_path / "s"), n_boot=20)
+        assert matplotlib.get_backend() == "pdf"
+    finally:
+        matplotlib.use(before)
