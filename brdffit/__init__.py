@@ -39,7 +39,8 @@ from brdffit.io.nbrdf import read_nbrdf, read_nbrdf_measurements
 from brdffit.io.rgl import read_rgl, read_rgl_at
 from brdffit.io.synthetic import synthesize
 from brdffit.io.table import read_table
-from brdffit.report.html import write_fit_html, write_sweep_html
+from brdffit.report.html import write_fit_html
+from brdffit.report.sweep_html import write_sweep_html
 from brdffit.selection.rank import Ranking, rank
 from brdffit.selection.reduction import Reduction
 from brdffit.selection.simplify import simplify

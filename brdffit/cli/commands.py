@@ -26,9 +26,10 @@ from brdffit.io.load import load_measurements
 from brdffit.io.merl_grid import merl_grid
 from brdffit.models import label
 from brdffit.models.check import check_model, format_table
-from brdffit.report.html import write_fit_html, write_sweep_html
+from brdffit.report.html import write_fit_html
 from brdffit.report.markdown import write_report
 from brdffit.report.posterior_figures import corner_figure
+from brdffit.report.sweep_html import write_sweep_html
 from brdffit.selection.families import read_families
 from brdffit.selection.rank import fit_models, rank
 from brdffit.selection.simplify import simplify

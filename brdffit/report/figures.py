@@ -32,16 +32,18 @@ from brdffit import models
 from brdffit.core.geometry import MERL_SHAPE
 from brdffit.core.measurements import Measurements
 from brdffit.core.result import FitResult
-from brdffit.report.render import (
-    DEFAULT_LIGHT,
-    Environment,
+from brdffit.report.lookup import (
     Fit,
-    delta_e,
     in_plane_directions,
     merl_stride,
     model_brdf,
     nearest_bin,
     slice_indices,
+)
+from brdffit.report.render import (
+    DEFAULT_LIGHT,
+    Environment,
+    delta_e,
     sphere_images,
     sphere_normals,
     tonemap,
@@ -167,7 +169,7 @@ def polar_figure(
     """In-plane BRDF ``f`` (1/sr, no cosine) against the signed viewing angle, per channel.
 
     One panel per incidence angle; lines: the fit (``model.eval`` at
-    :func:`~brdffit.report.render.in_plane_directions`), dots: the data by nearest bin (missing
+    :func:`~brdffit.report.lookup.in_plane_directions`), dots: the data by nearest bin (missing
     bins left out; data measured at or below 0 as orange triangles on the axis floor,
     :func:`mark_nonpositive`). Log y axis; the dotted line marks the mirror direction.
     """
@@ -285,7 +287,7 @@ def plot_slices(
     """``f cos(theta_i)`` against ``theta_h`` at a few ``theta_d``, data dots and model lines.
 
     The samples nearest to each (theta_d, phi_d) line are taken from ``data`` (valid
-    samples only, :func:`brdffit.report.render.slice_indices`); the y axis is logarithmic,
+    samples only, :func:`brdffit.report.lookup.slice_indices`); the y axis is logarithmic,
     and data measured at or below 0 are orange triangles on its floor (:func:`mark_nonpositive`).
     """
     fig = Figure(figsize=(4.2 * len(theta_d_deg), 3.6), layout="constrained")

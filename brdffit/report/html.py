@@ -1,4 +1,5 @@
-"""One self-contained HTML file per fit and per sweep: tables and figures, nothing external.
+"""One self-contained HTML file per fit: tables and figures, nothing external; and the
+building blocks the sweep page (:mod:`brdffit.report.sweep_html`) shares.
 
 Every figure is embedded as a base64 PNG (``data:`` URI) and the style sheet is inline,
 so the file opens anywhere, offline, and can be mailed as it is. Files are written
@@ -8,9 +9,8 @@ atomically (:mod:`brdffit.util.atomic`).
   metric, noise model, status, steps, samples), its parameters as value +/- standard
   error with start values and flags, its warnings, and the three figures of
   :mod:`brdffit.report.figures` (lit spheres, in-plane curves, theta_h x theta_d images).
-* :func:`write_sweep_html`: ``<sweep_dir>/report.html`` with, per metric, the tables
-  and figures of the Markdown sweep report (:func:`brdffit.report.markdown.write_report`),
-  computed once for both (:func:`brdffit.report.sweep_sections.metric_sections`).
+* :func:`brdffit.report.sweep_html.write_sweep_html`: the sweep's page, from the same
+  blocks (:func:`html_table`, :func:`png_data_uri`, the page and its style).
 """
 
 from __future__ import annotations
@@ -21,7 +21,6 @@ import html
 import io
 import math
 import os
-from collections import Counter
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -33,10 +32,6 @@ from brdffit.core.result_terms import errors_assumed
 from brdffit.errors import MeasurementsError
 from brdffit.export import ERROR_DEFINITION, Export
 from brdffit.report import figures
-from brdffit.report.sweep_sections import metric_sections, read_sweep
-from brdffit.selection.rank import NOTE, TIES
-from brdffit.selection.survival import survival_table
-from brdffit.selection.sweep_results import SweepResults
 from brdffit.util.atomic import write_text
 
 STYLE = """
@@ -74,7 +69,7 @@ def _figure(fig: object, alt: str, caption: str) -> str:
     )
 
 
-def _figure_or_note(fig: object | None, note: str, alt: str, caption: str) -> str:
+def figure_or_note(fig: object | None, note: str, alt: str, caption: str) -> str:
     """The figure, or where there is none (:class:`~brdffit.report.sweep_sections.MetricSection`)
     the note saying why."""
     if fig is None:
@@ -112,12 +107,12 @@ def html_table(head: Sequence[str] | None, rows: Sequence[Sequence[str]]) -> str
     return f"<table>{thead}<tbody>{''.join(row(r) for r in rows)}</tbody></table>"
 
 
-def _from_csv(text: str) -> str:
+def table_from_csv(text: str) -> str:
     rows = list(csv.reader(io.StringIO(text)))
     return html_table(rows[0], rows[1:]) if rows else ""
 
 
-def _from_markdown(text: str) -> str:
+def table_from_markdown(text: str) -> str:
     """A table of :func:`brdffit.util.text_table.render` in Markdown (cells hold no ``|``)
     as HTML."""
     lines = [ln.strip() for ln in text.strip().splitlines() if ln.strip()]
@@ -125,7 +120,7 @@ def _from_markdown(text: str) -> str:
     return html_table(rows[0], rows[2:]) if rows else ""
 
 
-def _page(title: str, body: list[str]) -> str:
+def page(title: str, body: list[str]) -> str:
     return (
         "<!DOCTYPE html>\n"
         f'<html lang="en"><head><meta charset="utf-8"><title>{html.escape(title)}</title>'
@@ -133,7 +128,7 @@ def _page(title: str, body: list[str]) -> str:
     )
 
 
-def _write(path: str | os.PathLike[str], text: str) -> Path:
+def write_page(path: str | os.PathLike[str], text: str) -> Path:
     try:
         write_text(path, text)
     except OSError as e:
@@ -254,7 +249,7 @@ def fit_html(
         body += _export_section(exports)
     body += ["<h2>Data</h2>", f"<pre>{html.escape(data.summary())}</pre>"]
     body += ["<h2>Text report</h2>", f"<pre>{html.escape(result.report())}</pre>"]
-    return _page(title, body)
+    return page(title, body)
 
 
 def _export_section(exports: Sequence[tuple[Export, Sequence[Path]]]) -> list[str]:
@@ -309,99 +304,4 @@ def write_fit_html(
     if not folder.is_dir():  # say so before the figures are drawn
         raise OSError(f"{path}: cannot be written: no folder {folder}")
     page = fit_html(result, data, title=title, sphere_size=sphere_size, exports=exports)
-    return _write(path, page)
-
-
-# --------------------------------------------------------------------------- a sweep
-
-
-def _sweep_header(res: SweepResults) -> list[str]:
-    s = res.manifest["settings"]
-    fams = Counter(res.family(m) for m in res.materials)
-    unconv = sum(not r.converged for r in res.records)
-    total = len(res.materials) * len(res.models) * len(res.metrics)
-    items = [
-        f"materials: {len(res.materials)} ("
-        + ", ".join(f"{f} {n}" for f, n in sorted(fams.items()))
-        + ")",
-        f"models: {', '.join(res.models)}",
-        f"metrics: {', '.join(res.metrics)} (compare models only under the same metric)",
-        f"MERL grid stride {tuple(s.get('stride', ()))}, angle cut {s.get('cut_deg')} deg",
-        f"results: {len(res.records)} of {total} tasks, {unconv} not converged, "
-        f"{len(res.errors)} errors",
-        *(f"unreadable, left out: {path} ({why})" for path, why in res.unreadable),
-    ]
-    provenance = Counter(r.provenance for r in res.records)
-    items += [f"computed by: {p} ({n} results)" for p, n in sorted(provenance.items())]
-    return ["<ul>", *(f"<li>{html.escape(i)}</li>" for i in items), "</ul>"]
-
-
-def sweep_html(
-    sweep_dir: str | os.PathLike[str],
-    *,
-    n_boot: int = 1000,
-    seed: int = 0,
-    families: str | os.PathLike[str] | None = None,
-) -> str:
-    """The HTML text of :func:`write_sweep_html` (arguments there)."""
-    res = read_sweep(sweep_dir, families)
-    title = f"brdffit sweep report: {Path(sweep_dir).resolve().name}"
-    body = [f"<h1>{html.escape(title)}</h1>", *_sweep_header(res)]
-    body.append(f'<p class="note">{html.escape(TIES)} {html.escape(NOTE)}</p>')
-    for sec in metric_sections(res, n_boot=n_boot, seed=seed):
-        body += [
-            f"<h2>Metric {html.escape(sec.metric)}</h2>",
-            "<h3>Ranking over all materials</h3>",
-        ]
-        body.append(_from_markdown(sec.aggregate.markdown))
-        body.append(
-            _figure_or_note(sec.rank_matrix, sec.rank_matrix_note, "rank matrix",
-                            "Rank per material.")
-        )  # fmt: skip
-        body += ["<h3>Best models per material family</h3>", _from_csv(sec.families.csv)]
-        body.append("<h3>Fit error against run time</h3>")
-        body.append(f'<p class="note">Over which materials: {html.escape(sec.caption)}.</p>')
-        body.append(_from_csv(sec.pareto.csv))
-        body.append(
-            _figure_or_note(sec.pareto_plot, sec.pareto_note, "Pareto plot",
-                            "Red: the Pareto front.")
-        )  # fmt: skip
-        body.append("<h3>Per material</h3>")
-        if sec.inline:
-            body.append(_from_csv(sec.per_material.csv))
-        else:
-            body.append(
-                f'<p class="note">{sec.n_rows} rows: see '
-                f"report/per_material_{html.escape(sec.metric)}.csv.</p>"
-            )
-    survivors = survival_table(sweep_dir, fmt="text")  # "" unless the sweep ran --simplify
-    if survivors:
-        body += [
-            "<h2>Model reduction (sweep --simplify)</h2>",
-            f"<pre>{html.escape(survivors)}</pre>",
-        ]
-    if res.errors:
-        rows = [
-            [e["material"], e["model"], e["metric"], f"{e['error']}: {e.get('message', '')}"]
-            for e in res.errors
-        ]
-        body += ["<h2>Errors</h2>", html_table(["material", "model", "metric", "error"], rows)]
-    return _page(title, body)
-
-
-def write_sweep_html(
-    sweep_dir: str | os.PathLike[str],
-    *,
-    n_boot: int = 1000,
-    seed: int = 0,
-    families: str | os.PathLike[str] | None = None,
-) -> Path:
-    """Write ``<sweep_dir>/report.html`` from the sweep's JSON files, atomically.
-
-    ``n_boot``, ``seed`` and ``families`` (a ``material,family`` CSV file) as in
-    :func:`brdffit.report.markdown.write_report`, so the numbers match its Markdown report.
-    Returns the path. Raises :class:`brdffit.errors.SweepError` when the folder holds no
-    ``sweep.json`` or the families file is not usable.
-    """
-    text = sweep_html(sweep_dir, n_boot=n_boot, seed=seed, families=families)
-    return _write(Path(sweep_dir) / "report.html", text)
+    return write_page(path, page)

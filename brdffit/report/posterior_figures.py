@@ -41,7 +41,7 @@ from brdffit.core.measurements import Measurements
 from brdffit.core.result import FitResult
 from brdffit.engine.posterior import Posterior
 from brdffit.report.figures import mark_nonpositive
-from brdffit.report.render import slice_indices
+from brdffit.report.lookup import slice_indices
 
 Z95 = 1.959963984540054
 """Two-sided 95% quantile of the standard normal."""

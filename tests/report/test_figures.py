@@ -17,15 +17,17 @@ from brdffit import Measurements, MeasurementsError, models, synthesize
 from brdffit.core.geometry import io_to_halfdiff, merl_indices
 from brdffit.io.merl_grid import lookup, merl_grid, merl_grid_measurements, merl_subgrid
 from brdffit.report.figures import halfdiff_figure, plot_slices, polar_figure, sphere_figure
-from brdffit.report.render import (
-    DEFAULT_LIGHT,
-    Environment,
+from brdffit.report.lookup import (
     in_plane_directions,
     merl_stride,
     model_brdf,
     nearest_bin,
-    render_sphere,
     slice_indices,
+)
+from brdffit.report.render import (
+    DEFAULT_LIGHT,
+    Environment,
+    render_sphere,
     sphere_images,
     sphere_normals,
     tonemap,
