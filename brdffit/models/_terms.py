@@ -130,6 +130,27 @@ def beckmann_lambda_rational(v: jax.Array, alpha_x: jax.Array, alpha_y: jax.Arra
     return jnp.where(a < 1.6, lam, 0.0)
 
 
+def charlie_d(h: jax.Array, a: jax.Array, floor: float) -> jax.Array:
+    """Charlie sheen NDF (Estevez and Kulla 2017, "Production Friendly Microfacet Sheen
+    BRDF", eq. 2), 1/sr, (N,): ``(2 + 1/a) (sin^2 theta_h)^(1/(2a)) / (2 pi)``.
+
+    ``a`` is the sheen alpha (``sheen_roughness^2`` in Filament and glTF's
+    ``KHR_materials_sheen``). ``sin^2 theta_h`` is floored at ``floor`` > 0 before the
+    power, which keeps the derivative of ``sin^(1/a)`` finite at ``theta_h = 0``
+    (``0 * log 0``); each caller gives its floor and its reason. It integrates to 1
+    against ``cos theta_h`` over the hemisphere for every ``a`` (the paper's
+    normalisation; ``tests/models/test_lobes.py`` checks it by quadrature).
+    """
+    sin2 = jnp.maximum(h[:, 0] ** 2 + h[:, 1] ** 2, floor)
+    return (2.0 + 1.0 / a) * jnp.exp(0.5 / a * jnp.log(sin2)) * (0.5 * INV_PI)
+
+
+def neubelt_v(cos_i: jax.Array, cos_o: jax.Array) -> jax.Array:
+    """Neubelt and Pettineo 2013 cloth visibility ``1 / (4 (NoL + NoV - NoL NoV))``, (N,):
+    the sheen visibility of Filament and of ``KHR_materials_sheen``'s reference."""
+    return 0.25 / (cos_i + cos_o - cos_i * cos_o)
+
+
 def smith_g(lambda_i: jax.Array, lambda_o: jax.Array, *, height_correlated: bool) -> jax.Array:
     """Masking-shadowing from Smith Lambdas: ``1/((1+Li)(1+Lo))`` or ``1/(1+Li+Lo)``."""
     if height_correlated:

@@ -84,15 +84,13 @@ SHEEN_ROUGHNESS = _rough("sheen_roughness", 0.5, "sheen perceptual roughness")
 SUBSURFACE_COLOR = _color("subsurface_color", 0.2, "cloth subsurface color, RGB", linear=False)
 
 
+SHEEN_FLOOR = 0.0078125
+"""Filament's floor ``sin^2 theta_h >= 2^-7`` in its Charlie ``D`` (``brdf.fs``)."""
+
+
 def charlie_d(h: jax.Array, a: jax.Array) -> jax.Array:
-    """Charlie sheen NDF (Estevez, Kulla 2017) with Filament's floor ``sin^2 >= 2^-7``."""
-    sin2 = jnp.maximum(h[:, 0] ** 2 + h[:, 1] ** 2, 0.0078125)
-    return (2.0 + 1.0 / a) * jnp.exp(0.5 / a * jnp.log(sin2)) * (0.5 * _terms.INV_PI)
-
-
-def neubelt_v(nol: jax.Array, nov: jax.Array) -> jax.Array:
-    """Neubelt-Pettineo 2013 cloth visibility ``1 / (4 (NoL + NoV - NoL NoV))``."""
-    return 0.25 / (nol + nov - nol * nov)
+    """Charlie sheen NDF (:func:`~brdffit.models._terms.charlie_d`) with Filament's floor."""
+    return _terms.charlie_d(h, a, SHEEN_FLOOR)
 
 
 def smith_ggx_v(wi: jax.Array, wo: jax.Array, at: jax.Array, ab: jax.Array) -> jax.Array:
@@ -177,7 +175,7 @@ class Filament(AbstractModel):
                 diffuse = params["base_color"][None, :] * ss * (fd * wrap / g.cos_i)[:, None]
             else:
                 diffuse = params["base_color"][None, :] * fd[:, None]
-            lobe = charlie_d(g.h, pr**2) * neubelt_v(g.cos_i, g.cos_o)
+            lobe = charlie_d(g.h, pr**2) * _terms.neubelt_v(g.cos_i, g.cos_o)
             return diffuse + params["sheen_color"][None, :] * lobe[:, None]
         m, bc = params["metallic"], params["base_color"]
         f0 = 0.16 * params["reflectance"] ** 2 * (1.0 - m) + bc * m
@@ -194,7 +192,9 @@ class Filament(AbstractModel):
         color = (bc * (1.0 - m))[None, :] * self.fd(alpha, g)[:, None]
         color = color + _terms.schlick_fresnel(f0, g.cos_d) * dv[:, None]
         if self.sheen:
-            lobe = charlie_d(g.h, params["sheen_roughness"] ** 2) * neubelt_v(g.cos_i, g.cos_o)
+            lobe = charlie_d(g.h, params["sheen_roughness"] ** 2) * _terms.neubelt_v(
+                g.cos_i, g.cos_o
+            )
             color = color + params["sheen_color"][None, :] * lobe[:, None]
         if self.clearcoat:
             fc = cc * (0.04 + 0.96 * (1.0 - g.cos_d) ** 5)

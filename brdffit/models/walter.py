@@ -36,19 +36,51 @@ rough surfaces" (EGSR), reflection part, plus a Lambert diffuse term.
   model lacks. A fitted ``ks`` on its bound therefore says "the model is short of
   grazing reflection here"; its standard error is undefined, as for any parameter
   held on a bound.
-* Affine parameters (solved by linear least squares for each start of a fit): ``kd``
-  and ``ks``; with ``specular_weight=False``, ``kd`` and ``f0``.
+* Affine parameters (solved by linear least squares for each start of a fit): ``kd``,
+  each lobe's ``ks`` and ``sheen_color``; with ``specular_weight=False``, ``kd``, each
+  ``f0`` and ``sheen_color``. The coat multiplies the base by a factor free of them, so
+  the model stays jointly affine in them with the coat on.
 * ``diffuse=False`` removes ``kd`` and the Lambert term.
+
+Layers and lobes the data may ask for (static options; off by default, and a feature
+that is off has no parameter and no operation):
+
+* ``n_lobes`` (>= 1): the specular lobe repeated, each lobe ``k`` with its own colour
+  (``ks_k``, ``f0_k``) and roughness (``alpha_k``; ``alpha_x_k``, ``alpha_y_k``), summed:
+  ``f = kd / pi + sum_k ks_k F_k D_k G_k / (4 cos_i cos_o)``. Ngan et al. 2005 (EGSR,
+  "Experimental analysis of BRDF models", section 5) and Löw et al. 2012 (TOG, section 6)
+  fitted two lobes to the MERL materials one lobe could not hold (metallic paints: a
+  narrow peak inside a wide halo). With one lobe the names carry no index (``ks``,
+  ``f0``, ``alpha``), as without the option. The default roughness of lobe ``k`` of
+  ``n`` is ``0.05 * 10^((k - 1)/(n - 1))``, a decade from the narrowest to the widest:
+  a start with equal lobes is a saddle of the loss (the gradient with respect to their
+  difference is zero there), so the defaults separate a narrow lobe from a wide one.
+  The lobes are exchangeable: the loss is the same with two lobes' labels swapped, so
+  an MCMC run may visit both labellings (each lobe's marginal then has two modes).
+* ``sheen``: Estevez and Kulla's (2017) Charlie sheen, the cloth lobe of Filament and of
+  glTF's ``KHR_materials_sheen``, added to the base:
+  ``sheen_color D_charlie(a) V_neubelt``, ``a = sheen_roughness^2``, ``D_charlie = (2 +
+  1/a) sin(theta_h)^(1/a) / (2 pi)``, ``V_neubelt = 1 / (4 (cos_i + cos_o - cos_i
+  cos_o))`` (Neubelt and Pettineo 2013). As in ``KHR_materials_sheen``'s reference without
+  its optional albedo scaling of the base (which needs a tabulated albedo), so a glTF
+  export carries the lobe as it is. ``sin^2 theta_h`` is floored at :data:`SHEEN_FLOOR`.
+* ``clearcoat``: glTF's ``KHR_materials_clearcoat`` layer over everything above:
+  ``f = (1 - c F_c) f_base + c F_c D_c V_c``, ``F_c = 0.04 + 0.96 (1 - cos_o)^5`` (an
+  IOR 1.5 coat, Schlick at the viewer's ``N.V`` as the extension's reference writes it:
+  not reciprocal), ``D_c`` GGX and ``V_c`` height-correlated Smith GGX ``G / (4 cos_i
+  cos_o)`` of ``clearcoat_alpha`` (the coat's GGX alpha, glTF's ``clearcoatRoughness^2``).
 
 The ``chi+`` factors of the paper are 1 for every reflection pair above the horizon.
 Singularities: ``1/(cos_i cos_o)`` grows at grazing angles but ``G`` cancels it to
 first order; cosines are > 0 for every sample the geometry marks above the horizon.
 Not energy conserving in the strict sense (``kd`` and the specular lobe are added
-uncoupled; single scattering loses energy at high roughness). Reciprocal.
+uncoupled; single scattering loses energy at high roughness). Reciprocal without the
+clear coat.
 """
 
 from __future__ import annotations
 
+import dataclasses
 from typing import ClassVar, Literal, final
 
 import equinox as eqx
@@ -63,12 +95,45 @@ KD = Parameter("kd", (3,), (0.0, 1.0), 0.3, "logit", "diffuse albedo, RGB", line
 ALPHA = Parameter("alpha", (), (1e-4, 2.0), 0.2, "log", "roughness alpha, unitless")
 ALPHA_X = Parameter("alpha_x", (), (1e-4, 2.0), 0.2, "log", "roughness along the tangent x")
 ALPHA_Y = Parameter("alpha_y", (), (1e-4, 2.0), 0.2, "log", "roughness along the bitangent y")
+SHEEN_COLOR = Parameter(
+    "sheen_color", (3,), (0.0, 1.0), 0.1, "logit", "sheen colour, RGB", linear=True
+)
+SHEEN_ROUGHNESS = Parameter(
+    "sheen_roughness", (), (0.045, 1.0), 0.5, "log", "sheen roughness, a = roughness^2"
+)
+"""Lower bound: Filament's ``MIN_PERCEPTUAL_ROUGHNESS`` (0.045), below which its float
+shaders lose ``a = roughness^2``; ``KHR_materials_sheen`` allows [0, 1], and 0 is a
+delta the Charlie normalisation ``2 + 1/a`` cannot hold."""
+CLEARCOAT = Parameter("clearcoat", (), (0.0, 1.0), 0.5, "logit", "clear coat weight, unitless")
+CLEARCOAT_ALPHA = Parameter(
+    "clearcoat_alpha", (), (0.045**2, 1.0), 0.01, "log", "clear coat GGX alpha, unitless"
+)
+"""Bounds: glTF's ``clearcoatRoughness`` in [0.045, 1] squared (the sheen's floor)."""
+SHEEN_FLOOR = 1e-30
+"""Floor of ``sin^2 theta_h`` in the sheen's Charlie ``D``: keeps ``0 log 0`` out of its
+derivative at ``theta_h = 0``, where ``D`` is 0; the value it adds there,
+``(1e-30)^(1/(2a))`` times the normalisation, is below 1e-12 for every ``a <= 1``."""
+COAT_F0 = 0.04
+"""Normal-incidence reflectance of the coat: ``KHR_materials_clearcoat``'s IOR 1.5."""
+
+
+def lobe_alpha_default(k: int, n: int) -> float:
+    """Default roughness of lobe ``k`` (1-based) of ``n``: 0.2 for one lobe, else a decade
+    spread ``0.05 * 10^((k - 1)/(n - 1))`` (module docstring)."""
+    return 0.2 if n == 1 else 0.05 * 10.0 ** ((k - 1) / (n - 1))
+
+
+def _indexed(p: Parameter, suffix: str, **change: object) -> Parameter:
+    if not suffix:
+        return dataclasses.replace(p, **change)
+    doc = f"{p.doc}, lobe {suffix[1:]}"
+    return dataclasses.replace(p, name=p.name + suffix, doc=doc, **change)
 
 
 @final
 class Walter(AbstractModel):
     """Microfacet BRDF (GGX by default) with Smith masking, Schlick Fresnel, a specular
-    weight and Lambert."""
+    weight and Lambert; optionally several lobes, a sheen and a clear coat."""
 
     distribution: Literal["ggx", "beckmann"] = eqx.field(static=True, default="ggx")
     masking: Literal["uncorrelated", "height_correlated"] = eqx.field(
@@ -78,6 +143,9 @@ class Walter(AbstractModel):
     anisotropic: bool = eqx.field(static=True, default=False)
     diffuse: bool = eqx.field(static=True, default=True)
     specular_weight: bool = eqx.field(static=True, default=True)
+    n_lobes: int = eqx.field(static=True, default=1)
+    sheen: bool = eqx.field(static=True, default=False)
+    clearcoat: bool = eqx.field(static=True, default=False)
 
     name: ClassVar[str] = "walter"
     reference: ClassVar[str] = "Walter, Marschner, Li, Torrance 2007, EGSR"
@@ -94,44 +162,85 @@ class Walter(AbstractModel):
             raise ValueError(f"walter: smith {self.smith!r} not 'exact' or 'rational'")
         if self.smith == "rational" and self.distribution != "beckmann":
             raise ValueError("walter: smith='rational' exists for distribution='beckmann' only")
+        n = self.n_lobes
+        if not isinstance(n, int) or isinstance(n, bool) or n < 1:
+            raise ValueError(f"walter: n_lobes {n!r} is not an integer >= 1")
+
+    @property
+    def reciprocal(self) -> bool:  # type: ignore[override]
+        """False with the clear coat, whose Fresnel weight reads the viewer's ``N.V``."""
+        return not self.clearcoat
+
+    def suffix(self, lobe: int) -> str:
+        """The index the names of lobe ``lobe`` (1-based) carry: none with one lobe."""
+        return "" if self.n_lobes == 1 else f"_{lobe}"
+
+    def lobe_parameters(self, lobe: int) -> tuple[Parameter, ...]:
+        """Table rows of specular lobe ``lobe`` (1-based): colour, then roughness."""
+        s, a = self.suffix(lobe), lobe_alpha_default(lobe, self.n_lobes)
+        rough = (ALPHA_X, ALPHA_Y) if self.anisotropic else (ALPHA,)
+        spec = _terms.fresnel_rows(self.specular_weight)
+        return tuple(_indexed(p, s) for p in spec) + tuple(_indexed(p, s, default=a) for p in rough)
 
     @property
     def parameters(self) -> tuple[Parameter, ...]:
-        rough = (ALPHA_X, ALPHA_Y) if self.anisotropic else (ALPHA,)
-        spec = _terms.fresnel_rows(self.specular_weight)
-        return ((KD,) if self.diffuse else ()) + spec + rough
+        out = (KD,) if self.diffuse else ()
+        for lobe in range(1, self.n_lobes + 1):
+            out += self.lobe_parameters(lobe)
+        out += (SHEEN_COLOR, SHEEN_ROUGHNESS) if self.sheen else ()
+        return out + ((CLEARCOAT, CLEARCOAT_ALPHA) if self.clearcoat else ())
 
-    def roughness(self, params: Params) -> tuple[jax.Array, jax.Array]:
-        """(alpha_x, alpha_y) for either roughness parametrisation."""
+    def roughness(self, params: Params, lobe: int = 1) -> tuple[jax.Array, jax.Array]:
+        """(alpha_x, alpha_y) of lobe ``lobe`` for either roughness parametrisation."""
+        s = self.suffix(lobe)
         if self.anisotropic:
-            return params["alpha_x"], params["alpha_y"]
-        return params["alpha"], params["alpha"]
+            return params[f"alpha_x{s}"], params[f"alpha_y{s}"]
+        return params[f"alpha{s}"], params[f"alpha{s}"]
 
-    def ndf(self, params: Params, h: jax.Array) -> jax.Array:
-        """The microfacet distribution D(h) in 1/sr, (N,)."""
-        ax, ay = self.roughness(params)
+    def ndf(self, params: Params, h: jax.Array, lobe: int = 1) -> jax.Array:
+        """The microfacet distribution D(h) of lobe ``lobe`` in 1/sr, (N,)."""
+        ax, ay = self.roughness(params, lobe)
         return (
             _terms.ggx_d(h, ax, ay) if self.distribution == "ggx" else _terms.beckmann_d(h, ax, ay)
         )
 
-    def lambda_(self, params: Params, v: jax.Array) -> jax.Array:
-        """Smith Lambda of direction ``v`` for the chosen distribution, (N,)."""
-        ax, ay = self.roughness(params)
+    def lambda_(self, params: Params, v: jax.Array, lobe: int = 1) -> jax.Array:
+        """Smith Lambda of direction ``v`` for lobe ``lobe``'s distribution, (N,)."""
+        ax, ay = self.roughness(params, lobe)
         if self.distribution == "ggx":
             return _terms.ggx_lambda(v, ax, ay)
         if self.smith == "rational":
             return _terms.beckmann_lambda_rational(v, ax, ay)
         return _terms.beckmann_lambda(v, ax, ay)
 
-    def core(self, params: Params, g: ShadingGeometry) -> jax.Array:
-        d = self.ndf(params, g.h)
+    def lobe(self, params: Params, g: ShadingGeometry, lobe: int = 1) -> jax.Array:
+        """Specular lobe ``lobe``: ``ks F D G / (4 cos_i cos_o)`` (1/sr), (N, 3)."""
+        s = self.suffix(lobe)
         gg = _terms.smith_g(
-            self.lambda_(params, g.wi),
-            self.lambda_(params, g.wo),
+            self.lambda_(params, g.wi, lobe),
+            self.lambda_(params, g.wo, lobe),
             height_correlated=self.masking == "height_correlated",
         )
-        f = _terms.weighted_schlick(params, g.cos_d, self.specular_weight)
-        spec = f * (d * gg / (4.0 * g.cos_i * g.cos_o))[:, None]
+        colour = {k: params[k + s] for k in ("ks", "f0") if k + s in params}
+        f = _terms.weighted_schlick(colour, g.cos_d, self.specular_weight)
+        return f * (self.ndf(params, g.h, lobe) * gg / (4.0 * g.cos_i * g.cos_o))[:, None]
+
+    def core(self, params: Params, g: ShadingGeometry) -> jax.Array:
+        f = self.lobe(params, g, 1)
+        for k in range(2, self.n_lobes + 1):
+            f = f + self.lobe(params, g, k)
         if self.diffuse:
-            spec = spec + _terms.lambert(params["kd"])
-        return spec
+            f = f + _terms.lambert(params["kd"])
+        if self.sheen:
+            a = params["sheen_roughness"] ** 2
+            d = _terms.charlie_d(g.h, a, SHEEN_FLOOR) * _terms.neubelt_v(g.cos_i, g.cos_o)
+            f = f + params["sheen_color"][None, :] * d[:, None]
+        if self.clearcoat:
+            a = params["clearcoat_alpha"]
+            gc = _terms.smith_g(
+                _terms.ggx_lambda(g.wi, a, a), _terms.ggx_lambda(g.wo, a, a), height_correlated=True
+            )
+            coat = _terms.ggx_d(g.h, a, a) * gc / (4.0 * g.cos_i * g.cos_o)
+            fc = params["clearcoat"] * (COAT_F0 + (1.0 - COAT_F0) * (1.0 - g.cos_o) ** 5)
+            f = f * (1.0 - fc)[:, None] + (fc * coat)[:, None]
+        return f

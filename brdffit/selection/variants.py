@@ -41,11 +41,23 @@ def renumber(name: str, drop: int | None) -> str:
     return "" if int(hit[2]) == drop else f"{hit[1]}_{int(hit[2]) - 1}"
 
 
+def lobe_name(name: str, names: Collection[str]) -> str:
+    """``name`` as a model whose parameter names are ``names`` spells it: a model with one
+    lobe may name it without the index (walter's ``ks``, where two lobes have ``ks_1`` and
+    ``ks_2``), so ``ks_1`` becomes ``ks`` when ``names`` has ``ks`` and no ``ks_1``."""
+    hit = _INDEX.match(name)
+    if name in names or not hit or hit[2] != "1" or hit[1] not in names:
+        return name
+    return hit[1]
+
+
 def start_rows(child: AbstractModel, rows: dict[str, np.ndarray], drop: int | None) -> dict:
     """Start rows of ``child`` from its parent's ``rows`` (``brdffit.simplify``); ``drop``:
-    the parent's lobe removed (later lobes move down by one)."""
+    the parent's lobe removed (later lobes move down by one; a lone lobe left may drop its
+    index, :func:`lobe_name`)."""
     out, r = {}, next(iter(rows.values())).shape[0]
-    back = {renumber(k, drop): k for k in rows}
+    names = [p.name for p in child.parameters]
+    back = {lobe_name(renumber(k, drop), names): k for k in rows}
     for p in child.parameters:
         src = back.get(p.name, p.name if drop is None else "")
         if src in rows:
@@ -157,9 +169,10 @@ def _option_child(child_base, parent, rows, drops, cost) -> tuple[AbstractModel,
     with it)."""
     grey, neutral = restrictions(parent)
     has = {p.name for p in child_base.parameters if p.neutral is not None}
+    child_names = [p.name for p in child_base.parameters]
     out = []
     for d in drops:
-        g, n = ([renumber(x, d) for x in names] for names in (grey, neutral))
+        g, n = ([lobe_name(renumber(x, d), child_names) for x in xs] for xs in (grey, neutral))
         g = [x for x in g if x in rgb_names(child_base)]
         child = restrict(child_base, g, [x for x in n if x in has])
         out.append((child, start_rows(child, rows, d), d))
