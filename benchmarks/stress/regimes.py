@@ -202,6 +202,19 @@ ROLES: dict[str, Roles] = {
         "base_color",
         floor_zero=("metallic",),
     ),
+    "gltf": Roles(
+        {
+            "base_color": [0.8, 0.5, 0.2],
+            "metallic": 0.3,
+            "roughness": 0.4,
+            "specular": 0.8,
+            "specular_f0": [0.04, 0.05, 0.06],
+        },
+        "roughness",
+        "squared",
+        "base_color",
+        floor_zero=("metallic",),
+    ),
     "kurt": Roles(
         {"kd": [0.2, 0.1, 0.05], "ks_1": [0.6, 0.5, 0.4], "f0_1": 0.3, "m_1": 0.2, "alpha_1": 0.3},
         "m_1",

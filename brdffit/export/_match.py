@@ -32,6 +32,7 @@ import numpy as np
 from scipy.optimize import least_squares
 from scipy.stats import qmc
 
+from brdffit.core.abstract_model import AbstractModel
 from brdffit.core.geometry import halfdiff_to_io
 
 N_DIRECTIONS = 4096
@@ -312,3 +313,16 @@ def generic_alpha(p: Mapping[str, np.ndarray]) -> float:
         return float(np.mean(found))
     n = first_of(p, ("n", "n_1"), None)
     return float(np.sqrt(2.0 / (float(n) + 2.0))) if n is not None else 0.2
+
+
+def walter_lobes(model: AbstractModel, p: Mapping[str, np.ndarray]) -> list[tuple]:
+    """Each specular lobe of a walter fit as ``(alpha_x, alpha_y, ks, f0)`` (``ks`` RGB, ones
+    without the specular weight), in the model's order; ``p`` has RGB parameters."""
+    out = []
+    for k in range(1, model.n_lobes + 1):
+        s = model.suffix(k)
+        ax, ay = (
+            (p[f"alpha_x{s}"], p[f"alpha_y{s}"]) if model.anisotropic else (p[f"alpha{s}"],) * 2
+        )
+        out.append((float(ax), float(ay), np.asarray(p.get(f"ks{s}", np.ones(3))), p[f"f0{s}"]))
+    return out

@@ -15,7 +15,10 @@ Exact mappings (measured by :func:`brdffit.export.export`):
   grey ``ks`` (or none): ``metallic = 0``, ``baseColor = 0``, ``specularFactor = ks``,
   ``f0`` through ``ior`` and ``specularColorFactor`` (``min(R0(ior) specularColor, 1) =
   f0``), ``alpha <= 1``; anisotropic ``alpha_x``, ``alpha_y`` through ``alpha_b =
-  min``, ``anisotropyStrength = sqrt((max - min)/(1 - min))``, rotation 0 or pi/2.
+  min``, ``anisotropyStrength = sqrt((max - min)/(1 - min))``, rotation 0 or pi/2;
+* ``gltf`` (:mod:`brdffit.models.gltf_pbr`), the material itself: every parameter is
+  written as it is (``specular_f0`` through ``ior`` and ``specularColorFactor``), the
+  extensions its options turn on; exact by construction.
 
 Everything else is approximate, chiefly because glTF couples its diffuse to the
 specular (``(1 - max F) baseColor / pi``) where brdffit's models add an uncoupled
@@ -32,7 +35,7 @@ import numpy as np
 from brdffit.core.abstract_model import AbstractModel
 from brdffit.core.result import FitResult
 from brdffit.export import gltf_brdf
-from brdffit.export._match import Family, Match, Slot, generic_alpha
+from brdffit.export._match import Family, Match, Slot, generic_alpha, walter_lobes
 from brdffit.models import label
 from brdffit.util.version import __version__
 
@@ -72,7 +75,9 @@ def ior_and_color(f0: np.ndarray) -> tuple[float, np.ndarray]:
 
     The IOR carries the largest channel (so the colour stays in [0, 1]) while that is
     below 0.99; beyond, ``ior = 1.5`` and the colour goes above 1, which
-    ``KHR_materials_specular`` allows.
+    ``KHR_materials_specular`` allows. An IOR within 1e-12 of 1.5 (``f0 = 0.04`` gives
+    1.4999999999999998) is written as 1.5, the default, so that no extension is written
+    for it; ``f0`` moves by 1e-12 relative, far inside the exact tolerance.
     """
     f0 = np.asarray(f0, float)
     top = float(np.max(f0))
@@ -80,7 +85,8 @@ def ior_and_color(f0: np.ndarray) -> tuple[float, np.ndarray]:
         return 1.5, np.zeros(3)
     if top < 0.99:
         s = np.sqrt(top)
-        return float((1 + s) / (1 - s)), f0 / top
+        ior = float((1 + s) / (1 - s))
+        return (1.5 if abs(ior - 1.5) <= 1.5e-12 else ior), f0 / top
     return 1.5, f0 / 0.04
 
 
@@ -140,13 +146,26 @@ def _start(ax: float, ay: float, cc: bool = False, sheen: bool = False, **values
 
 
 def _walter(model: AbstractModel, p: Mapping[str, np.ndarray]) -> list[Start]:
-    ax, ay = (p["alpha_x"], p["alpha_y"]) if model.anisotropic else (p["alpha"], p["alpha"])
-    ks = p.get("ks", np.ones(3))
-    kd = p.get("kd", np.zeros(3))
+    """One start per specular lobe (glTF holds one), with the sheen as
+    ``KHR_materials_sheen`` and the clear coat as ``KHR_materials_clearcoat``: walter's
+    are those extensions' formulas (:mod:`brdffit.models.walter`)."""
+    layers: dict[str, object] = {"base_color": p.get("kd", np.zeros(3))}
+    if model.sheen:
+        layers |= {"sheen_color": p["sheen_color"], "sheen_roughness": p["sheen_roughness"]}
+    if model.clearcoat:
+        layers |= {"clearcoat": p["clearcoat"]}
+        layers["clearcoat_roughness"] = float(np.sqrt(p["clearcoat_alpha"]))
     return [
         _start(
-            float(ax), float(ay), base_color=kd, specular=float(np.mean(ks)), specular_f0=p["f0"]
+            ax,
+            ay,
+            model.clearcoat,
+            model.sheen,
+            **layers,
+            specular=float(np.mean(ks)),
+            specular_f0=f0,
         )
+        for ax, ay, ks, f0 in walter_lobes(model, p)
     ]
 
 
@@ -195,6 +214,12 @@ def _course(model: AbstractModel, p: Mapping[str, np.ndarray]) -> list[Start]:
     return [_start(alpha, alpha, **values)]
 
 
+def _gltf(model: AbstractModel, p: Mapping[str, np.ndarray]) -> list[Start]:
+    """The identity: the model is this material (:mod:`brdffit.models.gltf_pbr`)."""
+    core = {"specular": 1.0, "specular_f0": np.full(3, 0.04)}  # without KHR_materials_specular
+    return [(gltf_family(None, model.clearcoat, model.sheen), core | dict(p))]
+
+
 def _generic(model: AbstractModel, p: Mapping[str, np.ndarray]) -> list[Start]:
     names = ("kd", "rd", "rho", "albedo", "base_color")
     kd = next((p[n] for n in names if n in p), np.full(3, 0.5))
@@ -214,6 +239,7 @@ def candidates(model: AbstractModel, p: Mapping[str, np.ndarray]) -> list[Start]
         "filament": _filament,
         "disney": _disney,
         "course_cook_torrance": _course,
+        "gltf": _gltf,
     }
     return table.get(model.name, _generic)(model, p)
 

@@ -104,6 +104,12 @@ EXACT = [
         {"f0": F0, "alpha_x": 0.05, "alpha_y": 0.4},
         {"gltf"},
     ),
+    (  # walter's sheen and clear coat are KHR_materials_sheen's and _clearcoat's formulas
+        "walter[masking=height_correlated,diffuse=false,sheen=true,clearcoat=true,grey=ks]",
+        {"ks": 0.7, "f0": F0, "alpha": 0.2, "sheen_color": [0.4, 0.2, 0.1]}
+        | {"sheen_roughness": 0.5, "clearcoat": 0.6, "clearcoat_alpha": 0.03},
+        {"gltf"},
+    ),
 ]
 
 
