@@ -204,3 +204,19 @@ def shading_geometry(wi: Float[ArrayLike, "n 3"], wo: Float[ArrayLike, "n 3"]) -
         cos_d=jnp.clip(jnp.sum(wi * h, axis=-1), 0, 1),
         above=above,
     )
+
+
+def in_plane_directions(
+    theta_i_deg: float, theta_o_deg: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """(wi, wo) in the plane of incidence (x-z plane; ``phi_d = 0``).
+
+    ``wi = (-sin theta_i, 0, cos theta_i)``, ``wo = (sin theta_o, 0, cos theta_o)``: a
+    positive ``theta_o`` lies on the specular side (mirror direction at ``theta_o =
+    theta_i``), a negative one on the side of the light (backscatter at ``-theta_i``).
+    """
+    to = np.deg2rad(np.asarray(theta_o_deg, float))
+    ti = np.deg2rad(theta_i_deg)
+    wi = np.broadcast_to([-np.sin(ti), 0.0, np.cos(ti)], (to.size, 3)).copy()
+    wo = np.stack([np.sin(to), np.zeros_like(to), np.cos(to)], axis=-1)
+    return wi, wo

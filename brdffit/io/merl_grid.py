@@ -10,7 +10,9 @@ keeps every ``stride``-th MERL bin, the middle one of each block of ``stride`` b
 each sample sits at the centre of its coarse cell (in MERL's ``u = sqrt(theta_h/(pi/2))``,
 ``theta_d`` and ``phi_d``) and is still a MERL bin centre; its weight is the summed
 weight of the fine cells of its block. :func:`merl_subgrid` picks those cells out of a
-full table. :func:`lookup` reads a full table at arbitrary directions, nearest bin.
+full table. :func:`lookup` reads a full table at arbitrary directions, nearest bin;
+:func:`nearest_bin` reads Measurements on the grid or a strided one (:func:`merl_stride`)
+the same way.
 
 The binary file format itself: :mod:`brdffit.io.merl`.
 """
@@ -18,10 +20,12 @@ The binary file format itself: :mod:`brdffit.io.merl`.
 from __future__ import annotations
 
 import functools
+import itertools
 from dataclasses import dataclass
 
 import numpy as np
 from jaxtyping import ArrayLike, Bool, Float, Int
+from scipy.ndimage import distance_transform_edt
 
 from brdffit.core.geometry import (
     MERL_SHAPE,
@@ -313,4 +317,72 @@ def lookup(
     if unmeasured == "nan":
         out[(out < 0.0).any(axis=1)] = np.nan
     out[~above_horizon(wi, wo)] = 0.0
+    return out
+
+
+_ODD_DIVISORS = (1, 3, 5, 9, 15, 45)  # odd divisors of 90 and of 180
+
+
+def merl_stride(data: Measurements) -> tuple[int, int, int]:
+    """The stride of the MERL (sub-)grid ``data`` lies on, in file order.
+
+    Raises :class:`MeasurementsError` naming the source when the samples are scattered
+    directions rather than a MERL grid (:func:`brdffit.io.merl_grid.merl_grid`).
+    """
+    if data.grid == MERL_SHAPE:
+        return (1, 1, 1)
+    for s in itertools.product(_ODD_DIVISORS, repeat=3):
+        shape = [n // k for n, k in zip(MERL_SHAPE, s, strict=True)]
+        if int(np.prod(shape)) != data.n:
+            continue
+        g = merl_grid(s)
+        if all(
+            np.allclose(getattr(g, a), getattr(data, a), rtol=0, atol=1e-9)
+            for a in ("theta_h", "theta_d", "phi_d")
+        ):
+            return s
+    raise MeasurementsError(
+        f"{data.source!r}: {data.n} samples are not a MERL grid or strided sub-grid in file "
+        "order; the data side of a figure needs one (read a MERL file, or resample)"
+    )
+
+
+def nearest_bin(
+    data: Measurements, wi: np.ndarray, wo: np.ndarray, *, fill: bool = False
+) -> np.ndarray:
+    """Data values (n, 3) in 1/sr at arbitrary directions, by nearest MERL bin.
+
+    As MERL's ``lookup_brdf_val`` (:func:`brdffit.io.merl_grid.lookup`), on the full grid or a
+    strided one (a sample stands for its coarse cell). Directions below the horizon give
+    0; a channel that ``data.channel_valid`` marks unfitted gives NaN, or with ``fill``
+    the value of the nearest bin whose channel is measured (:func:`filled_values`).
+    """
+    stride = np.array(merl_stride(data))
+    shape = tuple(int(n) for n in np.array(MERL_SHAPE) // stride)
+    th, td, pd, _ = io_to_halfdiff(wi, wo)
+    fine = merl_indices(th, td, pd)
+    flat = np.ravel_multi_index(tuple(i // s for i, s in zip(fine, stride, strict=True)), shape)
+    if fill:
+        out = filled_values(data, shape)[flat]
+    else:
+        out = np.where(data.channel_valid[flat], data.values[flat], np.nan)
+    out[~above_horizon(wi, wo)] = 0.0
+    return out
+
+
+def filled_values(data: Measurements, shape: tuple[int, int, int]) -> np.ndarray:
+    """(N, 3) ``data.values`` with every unfitted channel replaced by that channel's value
+    in the nearest fitted bin (Euclidean distance in (theta_h, theta_d, phi_d) bin
+    indices; ``scipy.ndimage.distance_transform_edt``). A channel with no fitted bin
+    stays NaN."""
+    out = np.full(data.values.shape, np.nan)
+    for c in range(3):
+        ok = data.channel_valid[:, c]
+        if not ok.any():
+            continue
+        idx = distance_transform_edt(
+            ~ok.reshape(shape), return_distances=False, return_indices=True
+        )
+        source = np.ravel_multi_index(tuple(idx), shape).ravel()
+        out[:, c] = data.values[source, c]
     return out

@@ -29,15 +29,13 @@ from matplotlib.colors import ListedColormap
 from matplotlib.figure import Figure
 
 from brdffit import models
-from brdffit.core.geometry import MERL_SHAPE
+from brdffit.core.geometry import MERL_SHAPE, in_plane_directions
 from brdffit.core.measurements import Measurements
 from brdffit.core.result import FitResult
+from brdffit.io.merl_grid import merl_stride, nearest_bin
 from brdffit.report.lookup import (
     Fit,
-    in_plane_directions,
-    merl_stride,
     model_brdf,
-    nearest_bin,
     slice_indices,
 )
 from brdffit.report.render import (
@@ -169,7 +167,7 @@ def polar_figure(
     """In-plane BRDF ``f`` (1/sr, no cosine) against the signed viewing angle, per channel.
 
     One panel per incidence angle; lines: the fit (``model.eval`` at
-    :func:`~brdffit.report.lookup.in_plane_directions`), dots: the data by nearest bin (missing
+    :func:`~brdffit.core.geometry.in_plane_directions`), dots: the data by nearest bin (missing
     bins left out; data measured at or below 0 as orange triangles on the axis floor,
     :func:`mark_nonpositive`). Log y axis; the dotted line marks the mirror direction.
     """

@@ -10,7 +10,7 @@ toward the light, ``wo`` toward the viewer. Radiance is linear RGB in the units 
 lighting (unit irradiance for the point light, relative units for :class:`Environment`).
 
 The fit and the data at the pixels' directions come from :mod:`brdffit.report.lookup`
-(:func:`~brdffit.report.lookup.model_brdf`, :func:`~brdffit.report.lookup.nearest_bin`,
+(:func:`~brdffit.report.lookup.model_brdf`, :func:`~brdffit.io.merl_grid.nearest_bin`,
 unmeasured bins filled from the nearest measured one; :func:`sphere_images` says which
 pixels rest on filled bins).
 
@@ -38,7 +38,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from brdffit.core.measurements import Measurements
-from brdffit.report.lookup import Brdf, Fit, merl_stride, model_brdf, nearest_bin
+from brdffit.io.merl_grid import merl_stride, nearest_bin
+from brdffit.report.lookup import Brdf, Fit, model_brdf
 
 # --------------------------------------------------------------------------- sphere
 

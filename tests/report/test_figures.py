@@ -14,14 +14,18 @@ import pytest
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 
 from brdffit import Measurements, MeasurementsError, models, synthesize
-from brdffit.core.geometry import io_to_halfdiff, merl_indices
-from brdffit.io.merl_grid import lookup, merl_grid, merl_grid_measurements, merl_subgrid
+from brdffit.core.geometry import in_plane_directions, io_to_halfdiff, merl_indices
+from brdffit.io.merl_grid import (
+    lookup,
+    merl_grid,
+    merl_grid_measurements,
+    merl_stride,
+    merl_subgrid,
+    nearest_bin,
+)
 from brdffit.report.figures import halfdiff_figure, plot_slices, polar_figure, sphere_figure
 from brdffit.report.lookup import (
-    in_plane_directions,
-    merl_stride,
     model_brdf,
-    nearest_bin,
     slice_indices,
 )
 from brdffit.report.render import (
