@@ -247,6 +247,14 @@ ROLES: dict[str, Roles] = {
     "phong": Roles(
         {"kd": [0.2, 0.3, 0.4], "ks": [0.3, 0.2, 0.1], "n": 80.0}, "n", "exponent", "kd"
     ),
+    "principled": Roles(  # Mitsuba's plugin, default options; alpha clamped at 0.001 as Disney
+        {"base_color": [0.8, 0.5, 0.2], "metallic": 0.3, "roughness": 0.4, "specular": 0.6},
+        "roughness",
+        "squared",
+        "base_color",
+        floor_zero=("metallic",),
+        alpha_floor=1e-3,
+    ),
     "sgd": Roles(
         # alpha is a slope variance (Beckmann's m^2), mapped as a width: the near-mirror
         # regime then has m = 0.03 (alpha 1e-3); m = 1e-3 would need alpha 1e-6, below

@@ -1,9 +1,12 @@
-"""Mitsuba 3's reflection plugins ``diffuse``, ``roughconductor`` and ``principled``, in numpy.
+"""Mitsuba 3's reflection plugins ``diffuse``, ``roughconductor`` and ``principled``, evaluated
+here without Mitsuba so that an export's error can be measured, and its parameters fitted.
 
-Written from Mitsuba 3.x's sources (``src/bsdfs/{diffuse,roughconductor,principled}.cpp``,
-``principledhelpers.h``, ``include/mitsuba/render/{microfacet,fresnel}.h``) so that an
-export's error can be measured, and its parameters fitted, without Mitsuba installed;
-``tests/export/test_export.py`` checks every function here against Mitsuba itself.
+``diffuse`` and ``roughconductor`` are written in numpy from Mitsuba 3.x's sources
+(``src/bsdfs/{diffuse,roughconductor}.cpp``, ``include/mitsuba/render/{microfacet,fresnel}.h``);
+``principled`` is the ``principled`` model (:mod:`brdffit.models.mitsuba_principled`, written
+from ``principled.cpp`` and ``principledhelpers.h``), compiled once.
+``tests/export/test_export.py`` and ``tests/models/test_mitsuba_principled.py`` check them
+against Mitsuba itself.
 
 Convention: brdffit's (``wi`` toward the light, ``wo`` toward the viewer, f in 1/sr
 without the cosine, (N, 3)). Mitsuba's ``si.wi`` is brdffit's ``wo`` and its ``wo`` is
@@ -17,23 +20,27 @@ What Mitsuba does that the formulas below follow:
   aspect``).
 * Masking is Smith's *separable* ``G1(wi) G1(wo)``; for Beckmann, ``G1`` is Walter et al.'s
   rational fit ``(3.535 a + 2.181 a^2) / (1 + 2.276 a + 2.577 a^2)`` (1 for ``a >= 1.6``).
-  Distribution values with ``D cos(theta_h) <= 1e-20`` are set to 0.
+  Distribution values with ``D cos(theta_h) <= 1e-20`` are set to 0 (``roughconductor``).
 * ``principled``: Fresnel is exact-dielectric for the untinted dielectric part
   (``eta = 2 / (1 - sqrt(0.08 specular)) - 1``), Schlick for the metallic and tinted parts;
   tints divide by Rec. 709 luminance (0.212671, 0.715160, 0.072169); the diffuse is Disney
   2012's (written as ``f_diff + f_retro``) blended toward Hanrahan-Krueger by ``flatness``;
   the clear coat is ``0.25 clearcoat F_schlick(0.04) GTR1 G1(wi) G1(wo)`` with GGX ``G1`` of
-  alpha 0.25 and *without* the microfacet ``1 / (4 cos_i cos_o)``.
+  alpha 0.25 and *without* the microfacet ``1 / (4 cos_i cos_o)``; ``specular = 0``
+  (``eta = 1``) drops the whole specular lobe, metallic part included.
 """
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Mapping
 
+import jax
 import numpy as np
 
+from brdffit.models.mitsuba_principled import MitsubaPrincipled
+
 INV_PI = 1.0 / np.pi
-REC709 = np.array([0.212671, 0.715160, 0.072169])
 
 
 def half_vector(wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
@@ -81,14 +88,6 @@ def fresnel_conductor(cos: np.ndarray, eta: np.ndarray, k: np.ndarray) -> np.nda
     return 0.5 * (rs + rs * (term3 - term4) / (term3 + term4))
 
 
-def fresnel_dielectric(cos: np.ndarray, eta: float) -> np.ndarray:
-    """Unpolarised Fresnel reflectance from outside, ``eta >= 1`` (Mitsuba's ``fresnel``), (N,)."""
-    cos_t = np.sqrt(1.0 - (1.0 - cos**2) / eta**2)
-    a_s = (cos - eta * cos_t) / (cos + eta * cos_t)
-    a_p = (eta * cos - cos_t) / (eta * cos + cos_t)
-    return 0.5 * (a_s**2 + a_p**2)
-
-
 def schlick_weight(cos: np.ndarray) -> np.ndarray:
     """``clip(1 - cos, 0, 1)^5``."""
     return np.clip(1.0 - cos, 0.0, 1.0) ** 5
@@ -127,30 +126,16 @@ def roughconductor(
     return np.asarray(specular) * fresnel_conductor(cos_d, eta, k) * lobe[:, None]
 
 
-def principled_eta(specular: float) -> float:
-    """The relative IOR ``principled`` derives from ``specular``: ``2 / (1 - sqrt(.08 s)) - 1``."""
-    return 2.0 / (1.0 - np.sqrt(0.08 * specular)) - 1.0
+PRINCIPLED_OPTIONS = tuple(f.name for f in dataclasses.fields(MitsubaPrincipled))
+"""The ``principled`` plugin's feature switches, as the model's static options."""
+_ALL_ON = MitsubaPrincipled(**dict.fromkeys(PRINCIPLED_OPTIONS, True))
+CHUNK = 1024
+"""Direction pairs per compiled call of :func:`principled` (the last chunk padded)."""
 
 
-def principled_alphas(roughness: float, anisotropic: float) -> tuple[float, float]:
-    """``(alpha_u, alpha_v)`` of ``principled`` (Mitsuba's ``calc_dist_params``)."""
-    aspect = np.sqrt(1.0 - 0.9 * anisotropic)
-    r2 = roughness**2
-    return max(0.001, r2 / aspect), max(0.001, r2 * aspect)
-
-
-def gtr1(cos_h: np.ndarray, alpha: float) -> np.ndarray:
-    """Mitsuba's ``GTR1Isotropic::eval`` (1/sr), (N,)."""
-    a2 = alpha**2
-    d = (a2 - 1.0) / (np.pi * np.log(a2) * (1.0 + (a2 - 1.0) * cos_h**2))
-    return np.where(d * cos_h > 1e-20, d, 0.0)
-
-
-def clearcoat_g1(v: np.ndarray) -> np.ndarray:
-    """``smith_ggx1`` of the clear coat, alpha 0.25, (N,)."""
-    c2 = v[:, 2] ** 2
-    g = 2.0 / (1.0 + np.sqrt(1.0 + 0.0625 * (1.0 - c2) / c2))
-    return np.where(v[:, 2] == 1.0, 1.0, g)
+@jax.jit
+def _evaluate(params: dict, wi: jax.Array, wo: jax.Array) -> jax.Array:
+    return _ALL_ON.eval(params, wi, wo)
 
 
 def principled(p: Mapping[str, object], wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
@@ -158,45 +143,23 @@ def principled(p: Mapping[str, object], wi: np.ndarray, wo: np.ndarray) -> np.nd
 
     ``p``: ``base_color`` (3,), and the floats ``metallic``, ``roughness``,
     ``anisotropic``, ``specular``, ``spec_tint``, ``sheen``, ``sheen_tint``,
-    ``flatness``, ``clearcoat``, ``clearcoat_gloss``; a missing one is 0 (the
-    plugin's feature switched off), except ``specular`` (Mitsuba's default 0.5).
+    ``flatness``, ``clearcoat``, ``clearcoat_gloss``; a missing one is 0 (the plugin's
+    feature switched off), except ``base_color``, ``roughness`` and ``specular``
+    (Mitsuba's default 0.5).
+
+    Evaluated (float64) by the ``principled`` model with every feature on and the
+    missing ones at 0, which is the model with them off (to round-off; checked in
+    ``tests/models/test_mitsuba_principled.py``), in chunks of :data:`CHUNK` pairs: one
+    compilation serves every feature set and direction count (0.7 s), and a call costs
+    less than the numpy transcription it replaced (0.8 against 0.9 ms at 2556 pairs).
     """
-
-    def get(name: str, default: float = 0.0) -> float:
-        return float(p.get(name, default))
-
-    base = np.asarray(p["base_color"], float)
-    m, r = get("metallic"), get("roughness")
-    eta = principled_eta(get("specular", 0.5))
-    h = half_vector(wi, wo)
-    cos_d = np.sum(wo * h, axis=-1)  # Mitsuba's dot(si.wi, wh)
-    lum = float(base @ REC709)
-    c_tint = base / lum if lum > 0 else np.ones(3)
-    ax, ay = principled_alphas(r, get("anisotropic"))
-    f_d = fresnel_dielectric(cos_d, eta)
-    st = get("spec_tint")
-    fresnel = (1 - m) * (1 - st) * f_d[:, None] + m * schlick(base, cos_d)
-    fresnel = fresnel + (1 - m) * st * schlick(c_tint * ((eta - 1) / (eta + 1)) ** 2, cos_d)
-    dg = distribution("ggx", h, ax, ay) * smith_g1("ggx", wi, ax, ay) * smith_g1("ggx", wo, ax, ay)
-    spec = np.where(f_d > 0, dg / (4.0 * wi[:, 2] * wo[:, 2]), 0.0)[:, None] * fresnel
-    out = spec
-    cc = get("clearcoat")
-    if cc > 0:
-        alpha = 0.1 + get("clearcoat_gloss") * (0.001 - 0.1)
-        coat = 0.25 * cc * (0.04 + 0.96 * schlick_weight(cos_d)) * gtr1(h[:, 2], alpha)
-        out = out + (coat * clearcoat_g1(wi) * clearcoat_g1(wo))[:, None]
-    if m < 1:
-        fo, fi = schlick_weight(wi[:, 2]), schlick_weight(wo[:, 2])
-        rr = 2.0 * r * cos_d**2
-        lobe = (1 - 0.5 * fi) * (1 - 0.5 * fo) + rr * (fo + fi + fo * fi * (rr - 1))
-        flat = get("flatness")
-        if flat > 0:
-            fss = (1 + (0.5 * rr - 1) * fo) * (1 + (0.5 * rr - 1) * fi)
-            f_ss = 1.25 * (fss * (1.0 / (wi[:, 2] + wo[:, 2]) - 0.5) + 0.5)
-            lobe = lobe + flat * (f_ss - lobe)
-        out = out + (1 - m) * INV_PI * base * lobe[:, None]
-        sheen = get("sheen")
-        if sheen > 0:
-            c_sheen = 1.0 + get("sheen_tint") * (c_tint - 1.0)
-            out = out + sheen * (1 - m) * schlick_weight(np.abs(cos_d))[:, None] * c_sheen
-    return out
+    values = {"base_color": 0.5, "roughness": 0.5, "specular": 0.5} | dict(p)
+    params = {
+        q.name: np.broadcast_to(np.asarray(values.get(q.name, 0.0), float), q.shape)
+        for q in _ALL_ON.parameters
+    }
+    n = len(wi)
+    up = np.tile([0.0, 0.0, 1.0], (-n % CHUNK, 1))
+    wi, wo = np.vstack([wi, up]), np.vstack([wo, up])
+    parts = [_evaluate(params, wi[k : k + CHUNK], wo[k : k + CHUNK]) for k in range(0, n, CHUNK)]
+    return np.concatenate([np.asarray(f) for f in parts])[:n]

@@ -104,11 +104,16 @@ PRINCIPLED_FEATURES = (
 )
 
 
-def principled_family(features: tuple[str, ...], with_diffuse: bool = False) -> Family:
+def principled_family(
+    features: tuple[str, ...], with_diffuse: bool = False, specular_low: float = 1e-3
+) -> Family:
     """``principled`` with ``base_color``, ``roughness``, ``specular`` and ``features``.
 
     ``features`` is a subset of :data:`PRINCIPLED_FEATURES`; the others stay 0 (off).
     ``with_diffuse``: blended with a ``diffuse`` (used with ``metallic`` fixed at 1).
+    ``specular_low``: the lower bound of ``specular``; 1e-3 keeps a fit off 0, where
+    Mitsuba drops the whole specular lobe (``eta = 1``); the ``principled`` model's own
+    mapping passes 0, which Mitsuba accepts.
     """
     metal = with_diffuse
 
@@ -127,7 +132,7 @@ def principled_family(features: tuple[str, ...], with_diffuse: bool = False) -> 
         Slot("base_color", 3, 0.0, 1.0),
         Slot("roughness", 1, 0.0, 1.0),
     )
-    slots += () if metal else (Slot("specular", 1, 1e-3, 1.0),)
+    slots += () if metal else (Slot("specular", 1, specular_low, 1.0),)
     slots += tuple(Slot(f, 1, 0.0, 1.0) for f in features)
     name = "blendbsdf(diffuse, principled[metallic=1])" if metal else "principled"
     return Family(name, slots, evaluate, build)
