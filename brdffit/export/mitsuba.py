@@ -42,6 +42,8 @@ each in numpy; the test checks it against Mitsuba):
   plugin on the film under a white environment, rel RMSE 0.131 and colour ratios
   1.18, 1.04, 1.10, where principled gave 0.188 and 1.31, 0.92, 0.99 and the old
   ``blendbsdf(diffuse, roughconductor)`` 0.174 and 0.89, 0.81, 0.82.
+* ``principled``, the model ``principled`` (:mod:`brdffit.models.mitsuba_principled`, Mitsuba's
+  plugin written as a model): its parameters and switched-on features are copied, exact.
 * ``roughplastic`` is never used: its diffuse part carries internal-reflection and
   transmittance factors that none of brdffit's models has.
 
@@ -66,7 +68,7 @@ import numpy as np
 
 from brdffit.core.abstract_model import AbstractModel
 from brdffit.core.result import FitResult
-from brdffit.export._match import Family, Match, first_of, generic_alpha
+from brdffit.export._match import Family, Match, first_of, generic_alpha, walter_lobes
 from brdffit.export.mitsuba_families import (
     PRINCIPLED_FEATURES,
     conductor_family,
@@ -75,6 +77,7 @@ from brdffit.export.mitsuba_families import (
     layered_family,
     principled_family,
 )
+from brdffit.export.mitsuba_lobes import lobes_start
 from brdffit.export.mitsuba_xml import to_xml
 from brdffit.models import label
 
@@ -156,6 +159,8 @@ def _dielectric_start(ax: float, ay: float, kd: np.ndarray, f0: np.ndarray) -> S
 
 
 def _walter(model: AbstractModel, p: Mapping[str, np.ndarray]) -> list[Start]:
+    if model.n_lobes > 1:  # nested blends; exact for GGX, uncorrelated, grey ks (mitsuba_lobes)
+        return [lobes_start(p.get("kd"), walter_lobes(model, p))]
     ax, ay = _alphas(p, "alpha")
     kd, ks = p.get("kd"), p.get("ks", np.ones(3))
     out = [_conductor_start(model.distribution, ax, ay, kd, ks, p["f0"])]
@@ -189,6 +194,13 @@ def _disney(model: AbstractModel, p: Mapping[str, np.ndarray]) -> list[Start]:
     start = {f: p[names.get(f, f)] for f in feats}
     keep = ("base_color", "roughness", "specular")
     return [(principled_family(feats), start | {k: p[k] for k in keep})]
+
+
+def _principled(model: AbstractModel, p: Mapping[str, np.ndarray]) -> list[Start]:
+    """The ``principled`` model is Mitsuba's plugin: its parameters are copied (exact)."""
+    feats = tuple(f for f in PRINCIPLED_FEATURES if f in p)
+    start = {k: p[k] for k in ("base_color", "roughness", "specular", *feats)}
+    return [(principled_family(feats, specular_low=0.0), start)]
 
 
 def _filament(model: AbstractModel, p: Mapping[str, np.ndarray]) -> list[Start]:
@@ -255,6 +267,7 @@ def candidates(model: AbstractModel, p: Mapping[str, np.ndarray]) -> list[Start]
         "walter": _walter,
         "cook_torrance": _cook_torrance,
         "disney": _disney,
+        "principled": _principled,
         "filament": _filament,
         "course_cook_torrance": _course,
         "ward": _ward,

@@ -104,6 +104,12 @@ EXACT = [
         {"f0": F0, "alpha_x": 0.05, "alpha_y": 0.4},
         {"gltf"},
     ),
+    (  # two lobes: nested blendbsdf of a diffuse and two principled metals
+        "walter[n_lobes=2,grey=ks_1+ks_2]",
+        {"kd": [0.1, 0.15, 0.05], "ks_1": 0.3, "f0_1": F0, "alpha_1": 0.05}
+        | {"ks_2": 0.4, "f0_2": [0.5, 0.6, 0.9], "alpha_2": 0.4},
+        {"mitsuba"},
+    ),
     (  # walter's sheen and clear coat are KHR_materials_sheen's and _clearcoat's formulas
         "walter[masking=height_correlated,diffuse=false,sheen=true,clearcoat=true,grey=ks]",
         {"ks": 0.7, "f0": F0, "alpha": 0.2, "sheen_color": [0.4, 0.2, 0.1]}
