@@ -22,6 +22,7 @@ from brdffit.engine.fit import fit
 from brdffit.engine.sample import check_arguments, sample
 from brdffit.errors import ParameterError
 from brdffit.export import check_targets, default_prefix, render_note, write_exports
+from brdffit.export.material import best_material
 from brdffit.io.load import load_measurements
 from brdffit.io.merl_grid import merl_grid
 from brdffit.models import label
@@ -305,3 +306,25 @@ def cmd_simplify(args) -> None:
     print(r.chosen)
     if args.json:
         _write(args.json, r.to_json())
+
+
+def cmd_material(args) -> None:
+    """Fit the target's forms, print each with its render-space error, write the chosen
+    one (:func:`brdffit.export.material.best_material`)."""
+    _check_output("--out", args.out)
+    forms = _specs(args.forms) if args.forms else None
+    reference = None if args.reference.lower() == "none" else args.reference
+    data = _load(args)
+    full = data if tuple(args.stride) == (1, 1, 1) else load_measurements(args.file)
+    m = best_material(
+        data,
+        args.target,
+        args.out,
+        forms=forms,
+        reference=reference,
+        measured=full,
+        cut_deg=args.cut,
+        seed=args.seed,
+        progress=None if args.no_progress else _say,
+    )
+    print(m.report())

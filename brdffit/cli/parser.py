@@ -15,6 +15,7 @@ from brdffit.cli.commands import (
     cmd_demo,
     cmd_fit,
     cmd_info,
+    cmd_material,
     cmd_models,
     cmd_rank,
     cmd_report,
@@ -23,6 +24,7 @@ from brdffit.cli.commands import (
     cmd_sweep,
 )
 from brdffit.engine.metrics import METRICS
+from brdffit.export.material import REFERENCE as MATERIAL_REFERENCE
 from brdffit.util.version import __version__
 
 MODELS_HELP = (
@@ -308,4 +310,26 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--no-progress", action="store_true", help=NO_PROGRESS_HELP)
     s.add_argument("--json", metavar="OUT", help="write the path and both fits as JSON")
     s.set_defaults(func=cmd_simplify)
+    s = sub.add_parser(
+        "material", help="fit the forms a renderer holds, write the best for render-space error"
+    )
+    data_args(s)
+    s.add_argument("--target", required=True, choices=["mitsuba", "gltf", "materialx"])
+    s.add_argument(
+        "--out", required=True, metavar="PREFIX", help="write PREFIX.<target files> (atomically)"
+    )
+    s.add_argument(
+        "--forms", metavar="SPECS", help="model specs to fit instead of the target's forms"
+    )
+    s.add_argument(
+        "--reference",
+        default=MATERIAL_REFERENCE,
+        metavar="SPEC",
+        help="a richer form fitted beside them, to measure what the target cannot hold "
+        f"(default {MATERIAL_REFERENCE}; none: skip)",
+    )
+    s.add_argument("--cut", type=_cut, default=80.0, help="zenith cut, degrees")
+    s.add_argument("--seed", type=_seed, default=0, help=SEED_HELP)
+    s.add_argument("--no-progress", action="store_true", help=NO_PROGRESS_HELP)
+    s.set_defaults(func=cmd_material)
     return p
