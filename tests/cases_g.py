@@ -58,3 +58,19 @@ ROWS: list[Case] = [
         },
     ),
 ]
+
+ROWS.append(
+    Case(
+        "walter",
+        {"thin_film": True},
+        {
+            "kd": [0.02, 0.02, 0.03],
+            "ks": [0.9, 0.9, 0.9],
+            "f0": [0.3, 0.3, 0.3],
+            "alpha": 0.12,
+            "film_weight": 0.8,
+            "film_thickness": 320.0,
+            "film_ior": 1.6,
+        },
+    )
+)

@@ -145,6 +145,82 @@ def charlie_d(h: jax.Array, a: jax.Array, floor: float) -> jax.Array:
     return (2.0 + 1.0 / a) * jnp.exp(0.5 / a * jnp.log(sin2)) * (0.5 * INV_PI)
 
 
+XYZ_TO_REC709 = (
+    (3.2404542, -1.5371385, -0.4985314),
+    (-0.9692660, 1.8760108, 0.0415560),
+    (0.0556434, -0.2040259, 1.0572252),
+)
+"""CIE XYZ to linear Rec. 709 / sRGB primaries (D65), rows R, G, B."""
+
+
+def _sensitivity(opd: jax.Array, shift: jax.Array) -> jax.Array:
+    """Belcour and Barla's (2017) Fourier-space XYZ colour matching functions, in linear RGB.
+
+    ``integral of cmf(lambda) cos(2 pi opd / lambda + shift) d lambda / integral of y-bar``
+    for an optical path difference ``opd`` (nm, (N, 1)) and a phase ``shift`` (radians,
+    (N, 3)), from their Gaussian fits of the CIE 1931 2-degree functions (their
+    supplemental code; the constants of ``KHR_materials_iridescence``'s reference).
+    Against the CIE tables integrated numerically over wavelength: XYZ within 0.02 up to
+    ``opd`` = 600 nm, RGB within 0.05 to 300 nm and 0.12 to 1000 nm (the fits' error,
+    grown by the matrix; ``tests/models/test_lobes.py``). The reflectance weighs these
+    terms by ``C_m = (R_s - T_121) sqrt(R_12 R_23)^m``, small unless both interfaces
+    reflect strongly, so its error is smaller.
+    """
+    phase = 2.0 * jnp.pi * opd * 1e-9  # (N, 1)
+    val = jnp.array([[5.4856e-13, 4.4201e-13, 5.2481e-13]], opd.dtype)
+    pos = jnp.array([[1.6810e06, 1.7953e06, 2.2084e06]], opd.dtype)
+    var = jnp.array([[4.3278e09, 9.3046e09, 6.6121e09]], opd.dtype)
+    xyz = val * jnp.sqrt(2.0 * jnp.pi * var) * jnp.cos(pos * phase + shift)
+    xyz = xyz * jnp.exp(-(phase**2) * var)
+    extra = (
+        9.7470e-14 * jnp.sqrt(2.0 * jnp.pi * 4.5282e09) * jnp.cos(2.2399e06 * phase + shift[:, :1])
+    )
+    extra = extra * jnp.exp(-4.5282e09 * phase**2)
+    xyz = (xyz + jnp.concatenate([extra, jnp.zeros_like(xyz[:, 1:])], axis=1)) / 1.0685e-7
+    return xyz @ jnp.asarray(XYZ_TO_REC709, xyz.dtype).T
+
+
+def thin_film_fresnel(
+    cos1: jax.Array, thickness: jax.Array, film_ior: jax.Array, base_f0: jax.Array
+) -> jax.Array:
+    """Reflectance (N, 3) of a dielectric thin film on a base, Belcour and Barla 2017 ("A
+    Practical Extension to Microfacet Theory for the Modeling of Varying Iridescence",
+    TOG 36(4)), in the form of glTF's ``KHR_materials_iridescence`` reference: air above.
+
+    ``cos1`` (N,) the cosine on the facet (``cos_d``); ``thickness`` of the film in nm;
+    ``film_ior`` its index (>= 1, so no total internal reflection); ``base_f0`` (3,) the
+    base's normal reflectance, read as a dielectric of index ``(1 + sqrt f0)/(1 - sqrt
+    f0)`` (an approximation for metals, as the extension says). Schlick reflectances at
+    both interfaces (``R12`` at ``theta_1``, ``R23`` at the refracted ``theta_2``), phase
+    shifts 0 or pi by the order of the indices, optical path difference ``OPD = 2
+    film_ior thickness cos(theta_2)`` (Belcour's code and the glTF sample viewer; the
+    extension's text writes ``cos(theta_1)``), the Airy sum's terms ``m = 0, 1, 2``
+    integrated over the spectrum analytically (:func:`_sensitivity`), negatives clamped to 0.
+    As the reference: the film's index goes to 1 as its thickness goes to 0 (smoothstep
+    over 0.03 nm), ``f0`` is clamped to 0.9999 and ``R12 R23`` to [1e-5, 0.9999]; ``f0``
+    is floored at 1e-12 (``sqrt f0`` at 1e-6) so that the derivative of ``sqrt f0`` stays
+    finite at ``f0 = 0``.
+    """
+    t = jnp.clip(thickness / 0.03, 0.0, 1.0)
+    eta2 = 1.0 + (film_ior - 1.0) * t * t * (3.0 - 2.0 * t)
+    # >= cos1^2 exactly (eta2 >= 1); the floor keeps float32 rounding off sqrt(0)
+    cos2 = jnp.sqrt(jnp.maximum(1.0 - (1.0 - cos1**2) / eta2**2, cos1**2))
+    r12 = schlick_fresnel(jnp.broadcast_to(((eta2 - 1.0) / (eta2 + 1.0)) ** 2, (1,)), cos1)
+    t121 = 1.0 - r12  # (N, 1), as r12
+    root = jnp.sqrt(jnp.clip(base_f0, 1e-12, 0.9999))
+    base_ior = (1.0 + root) / (1.0 - root)
+    r23 = schlick_fresnel(((base_ior - eta2) / (base_ior + eta2)) ** 2, cos2)  # (N, 3)
+    phi = jnp.pi + jnp.where(base_ior < eta2, jnp.pi, 0.0)[None, :]  # phi21 + phi23
+    opd = (2.0 * eta2 * thickness * cos2)[:, None]
+    r123 = jnp.clip(r12 * r23, 1e-5, 0.9999)
+    rs = t121**2 * r23 / (1.0 - r123)
+    out, cm = r12 + rs, rs - t121
+    for m in (1.0, 2.0):
+        cm = cm * jnp.sqrt(r123)
+        out = out + cm * 2.0 * _sensitivity(m * opd, m * jnp.broadcast_to(phi, out.shape))
+    return jnp.maximum(out, 0.0)
+
+
 def neubelt_v(cos_i: jax.Array, cos_o: jax.Array) -> jax.Array:
     """Neubelt and Pettineo 2013 cloth visibility ``1 / (4 (NoL + NoV - NoL NoV))``, (N,):
     the sheen visibility of Filament and of ``KHR_materials_sheen``'s reference."""

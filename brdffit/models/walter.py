@@ -70,6 +70,15 @@ that is off has no parameter and no operation):
   not reciprocal), ``D_c`` GGX and ``V_c`` height-correlated Smith GGX ``G / (4 cos_i
   cos_o)`` of ``clearcoat_alpha`` (the coat's GGX alpha, glTF's ``clearcoatRoughness^2``).
 
+* ``thin_film``: a dielectric film over the lobes' base (Belcour and Barla 2017, the
+  model of glTF's ``KHR_materials_iridescence``), for colour-shift foils and flake
+  paints whose hue turns with angle: each lobe's Fresnel becomes ``mix(F_schlick(f0),
+  F_film(cos_d), film_weight)`` with ``F_film`` the film's reflectance in RGB
+  (:func:`~brdffit.models._terms.thin_film_fresnel`: ``film_thickness`` in nm, its index
+  ``film_ior``, the base read from ``f0``), as the extension mixes them. The loss is
+  periodic in ``film_thickness`` (the hue cycles every ``lambda / (2 film_ior)``), so a
+  fit depends on the start screen spreading starts over the whole range.
+
 The ``chi+`` factors of the paper are 1 for every reflection pair above the horizon.
 Singularities: ``1/(cos_i cos_o)`` grows at grazing angles but ``G`` cancels it to
 first order; cosines are > 0 for every sample the geometry marks above the horizon.
@@ -109,6 +118,15 @@ CLEARCOAT_ALPHA = Parameter(
     "clearcoat_alpha", (), (0.045**2, 1.0), 0.01, "log", "clear coat GGX alpha, unitless"
 )
 """Bounds: glTF's ``clearcoatRoughness`` in [0.045, 1] squared (the sheen's floor)."""
+FILM_WEIGHT = Parameter("film_weight", (), (0.0, 1.0), 1.0, "logit", "thin-film weight, unitless")
+FILM_THICKNESS = Parameter(
+    "film_thickness", (), (0.0, 1200.0), 400.0, "logit", "thin-film thickness, nm"
+)
+"""Default and range: ``KHR_materials_iridescence``'s default maximum thickness (400 nm)
+and the range of its figures (to 1200 nm, where the colours have faded to pastels)."""
+FILM_IOR = Parameter("film_ior", (), (1.0, 2.5), 1.3, "logit", "thin-film index, unitless")
+"""Default ``KHR_materials_iridescence``'s 1.3; up to 2.5 (titanium dioxide); >= 1, the
+index of the air above, so the film has no total internal reflection."""
 SHEEN_FLOOR = 1e-30
 """Floor of ``sin^2 theta_h`` in the sheen's Charlie ``D``: keeps ``0 log 0`` out of its
 derivative at ``theta_h = 0``, where ``D`` is 0; the value it adds there,
@@ -146,6 +164,7 @@ class Walter(AbstractModel):
     n_lobes: int = eqx.field(static=True, default=1)
     sheen: bool = eqx.field(static=True, default=False)
     clearcoat: bool = eqx.field(static=True, default=False)
+    thin_film: bool = eqx.field(static=True, default=False)
 
     name: ClassVar[str] = "walter"
     reference: ClassVar[str] = "Walter, Marschner, Li, Torrance 2007, EGSR"
@@ -180,6 +199,10 @@ class Walter(AbstractModel):
         s, a = self.suffix(lobe), lobe_alpha_default(lobe, self.n_lobes)
         rough = (ALPHA_X, ALPHA_Y) if self.anisotropic else (ALPHA,)
         spec = _terms.fresnel_rows(self.specular_weight)
+        if self.thin_film:  # the film's reflectance is not affine in f0
+            spec = tuple(
+                dataclasses.replace(p, linear=False) if p.name == "f0" else p for p in spec
+            )
         return tuple(_indexed(p, s) for p in spec) + tuple(_indexed(p, s, default=a) for p in rough)
 
     @property
@@ -187,6 +210,7 @@ class Walter(AbstractModel):
         out = (KD,) if self.diffuse else ()
         for lobe in range(1, self.n_lobes + 1):
             out += self.lobe_parameters(lobe)
+        out += (FILM_WEIGHT, FILM_THICKNESS, FILM_IOR) if self.thin_film else ()
         out += (SHEEN_COLOR, SHEEN_ROUGHNESS) if self.sheen else ()
         return out + ((CLEARCOAT, CLEARCOAT_ALPHA) if self.clearcoat else ())
 
@@ -221,8 +245,14 @@ class Walter(AbstractModel):
             self.lambda_(params, g.wo, lobe),
             height_correlated=self.masking == "height_correlated",
         )
-        colour = {k: params[k + s] for k in ("ks", "f0") if k + s in params}
-        f = _terms.weighted_schlick(colour, g.cos_d, self.specular_weight)
+        f = _terms.schlick_fresnel(params["f0" + s], g.cos_d)
+        if self.thin_film:
+            film = _terms.thin_film_fresnel(
+                g.cos_d, params["film_thickness"], params["film_ior"], params["f0" + s]
+            )
+            f = f + params["film_weight"] * (film - f)
+        if self.specular_weight:
+            f = params["ks" + s][None, :] * f
         return f * (self.ndf(params, g.h, lobe) * gg / (4.0 * g.cos_i * g.cos_o))[:, None]
 
     def core(self, params: Params, g: ShadingGeometry) -> jax.Array:

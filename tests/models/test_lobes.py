@@ -131,3 +131,109 @@ def test_the_model_is_jointly_affine_in_its_linear_parameters():
     f0, basis = linear_split(m, p, g, names)
     x = jnp.concatenate([jnp.ravel(p[n]) for n in names])
     np.testing.assert_allclose(f0 + basis @ x, m.evaluate(p, g), rtol=1e-10, atol=1e-14)
+
+
+# --- thin film: KHR_materials_iridescence's reference text, and the CIE tables ----------------
+def _spec_iridescence(cos1, thickness, film_ior, base_f0):
+    """numpy transcription of the GLSL in KHR_materials_iridescence's README (outside IOR 1),
+    per sample; OPD with cos(theta_2) as the glTF sample viewer and Belcour's code."""
+    xyz_to_rgb = np.array(
+        [[3.2404542, -1.5371385, -0.4985314], [-0.9692660, 1.8760108, 0.0415560],
+         [0.0556434, -0.2040259, 1.0572252]]
+    )  # fmt: skip
+
+    def sensitivity(opd, shift):
+        phase = 2.0 * math.pi * opd * 1.0e-9
+        val = np.array([5.4856e-13, 4.4201e-13, 5.2481e-13])
+        pos = np.array([1.6810e06, 1.7953e06, 2.2084e06])
+        var = np.array([4.3278e09, 9.3046e09, 6.6121e09])
+        xyz = (
+            val
+            * np.sqrt(2.0 * math.pi * var)
+            * np.cos(pos * phase + shift)
+            * np.exp(-(phase**2) * var)
+        )
+        xyz[0] += (
+            9.7470e-14 * math.sqrt(2.0 * math.pi * 4.5282e09)
+            * math.cos(2.2399e06 * phase + shift[0]) * math.exp(-4.5282e09 * phase**2)
+        )  # fmt: skip
+        return xyz_to_rgb @ (xyz / 1.0685e-7)
+
+    def schlick(f0, c):
+        return f0 + (1.0 - f0) * (1.0 - c) ** 5
+
+    out = []
+    for c1 in cos1:
+        s = min(max(thickness / 0.03, 0.0), 1.0)
+        ior = 1.0 + (film_ior - 1.0) * s * s * (3.0 - 2.0 * s)
+        c2 = math.sqrt(1.0 - (1.0 / ior) ** 2 * (1.0 - c1**2))
+        r12 = schlick(((ior - 1.0) / (ior + 1.0)) ** 2, c1)
+        t121 = 1.0 - r12
+        phi21 = math.pi - (math.pi if ior < 1.0 else 0.0)
+        sq = np.sqrt(np.clip(base_f0, 0.0, 0.9999))
+        base_ior = (1.0 + sq) / (1.0 - sq)
+        r23 = schlick(((base_ior - ior) / (base_ior + ior)) ** 2, c2)
+        phi = phi21 + np.where(base_ior < ior, math.pi, 0.0)
+        opd = 2.0 * ior * thickness * c2
+        r123 = np.clip(r12 * r23, 1e-5, 0.9999)
+        rs = t121**2 * r23 / (1.0 - r123)
+        i, cm = r12 + rs, rs - t121
+        for m in (1, 2):
+            cm = cm * np.sqrt(r123)
+            i = i + cm * 2.0 * sensitivity(m * opd, m * phi)
+        out.append(np.maximum(i, 0.0))
+    return np.array(out)
+
+
+@pytest.mark.parametrize(
+    "thickness, film_ior, f0",
+    [
+        (400.0, 1.3, [0.04, 0.04, 0.04]),
+        (250.0, 1.8, [0.9, 0.6, 0.3]),
+        (900.0, 2.2, [0.2, 0.5, 0.02]),
+    ],
+)
+def test_thin_film_equals_the_iridescence_extension_text(thickness, film_ior, f0):
+    cos1 = np.linspace(0.02, 1.0, 60)
+    got = jax.jit(_terms.thin_film_fresnel)(
+        jnp.asarray(cos1), jnp.asarray(thickness), jnp.asarray(film_ior), jnp.asarray(f0)
+    )
+    want = _spec_iridescence(cos1, thickness, film_ior, np.asarray(f0))
+    np.testing.assert_allclose(np.asarray(got), want, rtol=1e-10, atol=1e-12)
+
+
+def test_thin_film_colours_follow_the_cie_tables():
+    """Belcour's Fourier-space fits against the CIE 1931 2-degree functions integrated over
+    wavelength (colour-science's tables): the cosine-modulated spectrum's XYZ, in RGB."""
+    import colour
+
+    cmfs = colour.MSDS_CMFS["CIE 1931 2 Degree Standard Observer"]
+    lam, xyz = cmfs.wavelengths * 1e-9, cmfs.values
+    m = np.asarray(_terms.XYZ_TO_REC709)
+    for opd in (0.0, 150.0, 300.0, 600.0, 1000.0):
+        for shift in (0.0, math.pi / 2, math.pi):
+            c = np.cos(2 * math.pi * opd * 1e-9 / lam + shift)
+            ref = m @ (np.trapezoid(xyz * c[:, None], lam, axis=0) / np.trapezoid(xyz[:, 1], lam))
+            got = _terms._sensitivity(jnp.array([[opd]]), jnp.full((1, 3), shift))[0]
+            np.testing.assert_allclose(np.asarray(got), ref, atol=0.05 if opd <= 300 else 0.12)
+
+
+def test_a_film_of_weight_zero_is_the_plain_lobe_and_colour_turns_with_angle():
+    plain = models.get("walter")
+    film = models.get("walter", thin_film=True)
+    p = {"kd": [0.05, 0.05, 0.05], "ks": [0.8, 0.8, 0.8], "f0": [0.04] * 3, "alpha": 0.2}
+    wi, wo = random_pairs(8, 200)
+    zero = p | {"film_weight": 0.0, "film_thickness": 400.0, "film_ior": 1.5}
+    np.testing.assert_allclose(film.eval(zero, wi, wo), plain.eval(p, wi, wo), rtol=1e-12)
+    on = zero | {"film_weight": 1.0}
+    f = _terms.thin_film_fresnel(
+        jnp.linspace(0.05, 1.0, 20), jnp.asarray(400.0), jnp.asarray(1.5), jnp.full(3, 0.04)
+    )
+    hue = np.asarray(f) / np.asarray(f).sum(axis=1, keepdims=True)
+    assert np.ptp(hue, axis=0).max() > 0.1  # the colour changes with the angle
+    assert not np.allclose(film.eval(on, wi, wo), plain.eval(p, wi, wo), rtol=1e-3)
+    assert not m_linear(film, "f0") and m_linear(film, "ks")
+
+
+def m_linear(model, name: str) -> bool:
+    return model.parameter(name).linear
