@@ -1,6 +1,7 @@
 """Export to glTF 2.0: a document holding one material (``pbrMetallicRoughness`` and the
 ``KHR_materials_specular``, ``_ior``, ``_anisotropy``, ``_clearcoat``, ``_sheen`` extensions
-where they apply), evaluated with :mod:`brdffit.export.gltf_brdf`.
+where they apply), evaluated with :mod:`brdffit.export.gltf_brdf`, on a unit sphere
+(:mod:`brdffit.export.gltf_mesh`) so that a viewer shows it.
 
 Roughness convention: glTF's ``roughnessFactor`` is perceptual, ``alpha = roughness^2``
 (as in Filament, Disney and MaterialX). A GGX ``alpha`` (walter) is written as
@@ -36,6 +37,7 @@ from brdffit.core.abstract_model import AbstractModel
 from brdffit.core.result import FitResult
 from brdffit.export import gltf_brdf
 from brdffit.export._match import Family, Match, Slot, generic_alpha, walter_lobes
+from brdffit.export.gltf_mesh import add_sphere
 from brdffit.models import label
 from brdffit.util.version import __version__
 
@@ -273,6 +275,7 @@ def finish(result: FitResult, model: AbstractModel, m: Match) -> tuple[dict, dic
     doc = {"asset": {"version": "2.0", "generator": f"brdffit {__version__}"}}
     used = sorted(mat.get("extensions", {}))
     doc |= ({"extensionsUsed": used} if used else {}) | {"materials": [mat]}
+    doc = add_sphere(doc)  # a viewer shows the material on a unit sphere
     notes = [
         "roughness: glTF roughnessFactor is perceptual, alpha = roughness^2; a GGX alpha is "
         "written as sqrt(alpha), a perceptual roughness as it is",
