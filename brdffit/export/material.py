@@ -7,11 +7,24 @@ and each is scored in *render space* against the measurement itself
 (:func:`render_error`):
 
 * **albedo error**: the directional albedo ``a(wo) = integral of f cos(theta_i) dwi``
-  (``theta_i`` < 80 degrees) at views 0, 30, 60 and 75 degrees, the RMS over views and
-  R, G, B of ``(a_fit - a_data) / a_data``: what a render under an environment shows;
-* **point-light error**: the relative RMS of ``f cos(theta_i)``, ``||fit - data|| /
-  ||data||``, along the plane of incidence (light at 20, 45 and 70 degrees, view from
-  -80 to 80 degrees in 1-degree steps): what a render under one light shows.
+  (``theta_i`` < 80 degrees) at views 0, 30, 60 and 75 degrees, ``||a_fit - a_data|| /
+  ||a_data||`` over views and R, G, B: what a render under a white environment shows
+  (a channel the material barely reflects weighs as little as it shows; a per-channel
+  ratio would explode on it: RGL cg_sunflower's blue albedo is near 0). The integral is
+  taken over half vectors, ``dwi = 4 (wo.h) dwh``, with Gauss-Legendre panels in ``1 -
+  cos(theta_h)`` spaced geometrically from 1e-10 (:func:`_albedo_pairs`), so a lobe as
+  narrow as alpha 1e-4 carries its energy into the albedo as a render's importance
+  sampling would; a grid uniform in ``wi`` steps over it. (The 80-degree edge is a
+  step across the panels: a Lambertian's albedo comes out 1.1% high at normal view, on
+  the fit and the data alike);
+* **point-light error**: ``||fit - data|| / ||data||`` over the pixels and channels of a
+  unit sphere seen along its axis under a distant light from (3, 3, 4) (the scene of
+  ``benchmarks/render_check.py``): 48 x 48 pixels, those whose footprint lies wholly on
+  the sphere, each the mean of ``f cos(theta_i)`` at 3 x 3 points of its footprint. A
+  pixel averages over the normals it sees, as a render does: a lobe far narrower than a
+  pixel (a fit's alpha of 1e-4 chasing a peak) shows as the little it adds to the
+  pixel, where a sample on the exact mirror direction read it as 1e7 (in-plane slices
+  at whole degrees did: point errors of 1e4 on RGL cg_sunflower and ilm_solo_m_68).
 
 The data side reads the measurement at those directions by nearest MERL bin, a channel
 the reader left out taking its nearest measured bin's value
@@ -20,8 +33,7 @@ strided one (MERL, NBRDF and RGL-EPFL files do; a table of scattered samples doe
 Fits may run on a strided grid, but scores are read from the full-resolution grid
 (``measured``; ``brdffit material`` reads the file twice): on a coarse grid a sample
 stands for its whole cell, and near a highlight that step is part of the point-light
-error (satin_rosaline, the same glTF fit: 0.466 read at stride 5 5 9, 0.440 at full
-resolution).
+error.
 
 An export that is not exact (``Export.exact`` false) adds its own relative error of
 ``f cos(theta_i)`` against the fit to the point-light error: by the triangle inequality
@@ -37,6 +49,7 @@ target could not hold is a number (the render error a richer form reaches), not 
 
 from __future__ import annotations
 
+import functools
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -45,12 +58,10 @@ from pathlib import Path
 import numpy as np
 
 from brdffit import models
-from brdffit.core.geometry import in_plane_directions
 from brdffit.core.measurements import Measurements
 from brdffit.core.result import FitResult
 from brdffit.engine.fit import fit
 from brdffit.errors import ExportError
-from brdffit.export._match import albedo_directions, albedo_error, relative_rms
 from brdffit.export.api import RENDER_METRIC, Export, export, parse_targets, write_exports
 from brdffit.io.merl_grid import merl_stride, nearest_bin
 
@@ -90,8 +101,9 @@ render_check's own Monte Carlo noise is 2-5% relative RMSE under an environment,
 of the score is below what a render shows."""
 
 ALBEDO_VIEWS_DEG = (0.0, 30.0, 60.0, 75.0)
-LIGHTS_DEG = (20.0, 45.0, 70.0)
-VIEWS_DEG = np.arange(-80.0, 80.5, 1.0)
+LIGHT = np.array([3.0, 3.0, 4.0]) / 5.0
+"""Direction toward the light of the point-light sphere (render_check's light position)."""
+PIXELS, SUBSAMPLES = 48, 3
 
 
 @dataclass(frozen=True)
@@ -186,9 +198,64 @@ class Material:
         return out
 
 
-def _point_directions() -> tuple[np.ndarray, np.ndarray]:
-    pairs = [in_plane_directions(t, VIEWS_DEG) for t in LIGHTS_DEG]
-    return np.concatenate([p[0] for p in pairs]), np.concatenate([p[1] for p in pairs])
+@functools.lru_cache(maxsize=1)
+def _albedo_pairs() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(wi, wo, weight)`` of the albedo quadrature at each view of
+    :data:`ALBEDO_VIEWS_DEG`, in view order with equal counts (module docstring): 30
+    panels of 8 Gauss-Legendre nodes in ``t = 1 - cos(theta_h)`` (``dwh = dt dphi``), 48
+    azimuths; ``weight`` (sr) is 0 where ``wi`` lies beyond the 80-degree cut."""
+    ends = np.concatenate([[0.0], np.geomspace(1e-10, 1.0, 30)])
+    x, w = np.polynomial.legendre.leggauss(8)
+    lo, hi = ends[:-1, None], ends[1:, None]
+    t = (0.5 * (hi - lo) * x + 0.5 * (hi + lo)).ravel()
+    wt = (0.5 * (hi - lo) * w).ravel()
+    phi = (np.arange(48) + 0.5) * 2.0 * np.pi / 48
+    tt, pp = (a.ravel() for a in np.meshgrid(t, phi, indexing="ij"))
+    ww = np.repeat(wt, len(phi)) * 2.0 * np.pi / len(phi)
+    cz = 1.0 - tt
+    sz = np.sqrt(np.maximum(1.0 - cz**2, 0.0))
+    h = np.stack([sz * np.cos(pp), sz * np.sin(pp), cz], axis=1)
+    out = []
+    for view in np.radians(ALBEDO_VIEWS_DEG):
+        wo = np.array([np.sin(view), 0.0, np.cos(view)])
+        oh = h @ wo
+        wi = 2.0 * oh[:, None] * h - wo
+        ok = (oh > 0.0) & (wi[:, 2] > np.cos(np.radians(80.0)))
+        wi = np.where(ok[:, None], wi, np.array([0.0, 0.0, 1.0]))
+        out.append((wi, np.broadcast_to(wo, wi.shape), np.where(ok, 4.0 * oh * ww, 0.0)))
+    return tuple(np.concatenate(parts) for parts in zip(*out, strict=True))
+
+
+@functools.lru_cache(maxsize=1)
+def _sphere_pairs() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Local ``(wi, wo)`` at the sub-pixel points of the point-light sphere, and each
+    point's pixel (module docstring). The frame at normal ``n`` is Duff et al.'s (2017)
+    branchless orthonormal basis; the BRDF is isotropic, so its choice does not matter."""
+    step = 2.0 / PIXELS
+    centres = -1.0 + step * (np.arange(PIXELS) + 0.5)
+    cx, cy = (a.ravel() for a in np.meshgrid(centres, centres))
+    keep = np.hypot(cx, cy) + np.sqrt(2.0) * step / 2 < 1.0
+    offsets = step * ((np.arange(SUBSAMPLES) + 0.5) / SUBSAMPLES - 0.5)
+    ox, oy = (a.ravel() for a in np.meshgrid(offsets, offsets))
+    x = (cx[keep][:, None] + ox[None, :]).ravel()
+    y = (cy[keep][:, None] + oy[None, :]).ravel()
+    pixel = np.repeat(np.arange(int(keep.sum())), SUBSAMPLES**2)
+    n = np.stack([x, y, np.sqrt(1.0 - x**2 - y**2)], axis=1)
+    sign = np.where(n[:, 2] >= 0.0, 1.0, -1.0)
+    a = -1.0 / (sign + n[:, 2])
+    b = n[:, 0] * n[:, 1] * a
+    t = np.stack([1.0 + sign * n[:, 0] ** 2 * a, sign * b, -sign * n[:, 0]], axis=1)
+    u = np.stack([b, sign + n[:, 1] ** 2 * a, -n[:, 1]], axis=1)
+
+    def local(v: np.ndarray) -> np.ndarray:
+        return np.stack([t @ v, u @ v, n @ v], axis=1)
+
+    return local(LIGHT), local(np.array([0.0, 0.0, 1.0])), pixel
+
+
+def _pooled(fit: np.ndarray, data: np.ndarray) -> float:
+    """``||fit - data|| / ||data||`` over every value given."""
+    return float(np.linalg.norm(fit - data) / max(np.linalg.norm(data), 1e-300))
 
 
 def render_error(data: Measurements, fitted: FitResult, export_error: float = 0.0) -> RenderError:
@@ -202,15 +269,20 @@ def render_error(data: Measurements, fitted: FitResult, export_error: float = 0.
         f = np.asarray(model.eval(params, wi, wo), float)
         return f, nearest_bin(data, wi, wo, fill=True)
 
-    wi, wo = albedo_directions()
+    wi, wo, weight = _albedo_pairs()
     f, d = both(wi, wo)
-    albedo = albedo_error(f, d)
-    n = len(wi) // len(ALBEDO_VIEWS_DEG)
-    ratio = f[:n].T @ wi[:n, 2] / np.maximum(d[:n].T @ wi[:n, 2], 1e-12)
-    wi, wo = _point_directions()
+    views = len(ALBEDO_VIEWS_DEG)
+    cos = (wi[:, 2] * weight)[:, None]
+    a_f, a_d = ((x * cos).reshape(views, -1, 3).sum(axis=1) for x in (f, d))
+    ratio = a_f[0] / np.maximum(a_d[0], 1e-12)
+    wi, wo, pixel = _sphere_pairs()
     f, d = both(wi, wo)
-    point = relative_rms(f, d, wi[:, 2]) + export_error
-    return RenderError(float(albedo), float(point), tuple(float(x) for x in ratio))
+    cos = np.maximum(wi[:, 2:3], 0.0)
+    n = pixel.max() + 1
+    img_f, img_d = (np.stack([np.bincount(pixel, (x * cos)[:, c], n) for c in range(3)], 1)
+                    for x in (f, d))  # fmt: skip
+    point = _pooled(img_f, img_d) + export_error
+    return RenderError(_pooled(a_f, a_d), float(point), tuple(float(x) for x in ratio))
 
 
 def _fit_form(

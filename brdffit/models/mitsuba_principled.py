@@ -93,9 +93,14 @@ ROUGHNESS = Parameter(
     "roughness, GGX alpha = max(.001, roughness^2)",
     solver="log",
 )  # a width: alpha = roughness^2 spans decades near the mirror (fitted in ln roughness)
-SPECULAR = _unit(
-    "specular", 0.5, "dielectric F0 = .08 specular, eta = 2 / (1 - sqrt(F0)) - 1", neutral=0.5
-)  # Mitsuba's default: F0 = 0.04, eta = 1.5
+SPECULAR = Parameter(
+    "specular", (), (1e-3, 1.0), 0.5, "logit",
+    "dielectric F0 = .08 specular, eta = 2 / (1 - sqrt(F0)) - 1", neutral=0.5,
+)  # fmt: skip
+"""Default: Mitsuba's (F0 = 0.04, eta = 1.5). Lower bound 1e-3, not 0: at exactly 0
+Mitsuba drops the whole specular lobe, metal part included, so a fit that ran to 1e-40
+(a dark dielectric) was written as 0 and lost its metal lobe (RGL ilm_solo_m_68: export
+error 0.9999); at 1e-3 the dielectric F0 is 8e-5, below any measurement."""
 SPEC_TINT = _unit("spec_tint", 0.1, "tint of the dielectric lobe toward C_tint, unitless")
 ANISOTROPIC = _unit("anisotropic", 0.1, "anisotropy, aspect = sqrt(1 - .9 anisotropic)")
 SHEEN = _unit("sheen", 0.1, "sheen strength (grazing w(cos_d) lobe), unitless", linear=True)

@@ -52,6 +52,23 @@ def test_render_error_of_a_scaled_lambert_is_the_scale(matte, scale):
     assert render_error(matte, _lambert_result(KD), export_error=0.05).point == pytest.approx(0.05)
 
 
+def test_a_lobe_narrower_than_a_pixel_adds_only_what_it_shows(matte):
+    """A fit with a near-delta lobe (alpha 1e-4, F = 1) over the measured body. Under the
+    point light a pixel averages it: the error is the lobe's energy in the few pixels whose
+    footprint holds the mirror normal (0.06), not its peak (1e7 1/sr). Under the white
+    environment it reflects everything: the albedo rises by 1 at every view."""
+    r = FitResult.from_dict(
+        {"model": "walter", "options": {}, "metric": "ngan", "loss": 0.0,
+         "params": {"kd": list(KD), "ks": [1.0] * 3, "f0": [1.0] * 3, "alpha": 1e-4},
+         "status": "CONVERGED", "source": "test"}
+    )  # fmt: skip
+    e = render_error(matte, r)
+    assert e.point < 0.1
+    body = KD * np.sin(np.radians(80.0)) ** 2  # kd/pi integrated over theta_i < 80 degrees
+    # 2%: the half-vector quadrature steps over the 80-degree edge (1.1% on a Lambertian)
+    np.testing.assert_allclose(e.ratio, (body + 1.0) / body, rtol=0.02)
+
+
 def test_choose_takes_the_simplest_form_within_the_tolerance():
     def form(k: int, score: float) -> Form:
         r = dataclasses.replace(_lambert_result(KD), n_free=k)
