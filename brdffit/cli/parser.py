@@ -314,7 +314,12 @@ def build_parser() -> argparse.ArgumentParser:
         "material", help="fit the forms a renderer holds, write the best for render-space error"
     )
     data_args(s)
-    s.add_argument("--target", required=True, choices=["mitsuba", "gltf", "materialx"])
+    s.add_argument(
+        "--target",
+        required=True,
+        choices=["mitsuba", "gltf", "materialx"],
+        help="the renderer whose forms are fitted and written",
+    )
     s.add_argument(
         "--out", required=True, metavar="PREFIX", help="write PREFIX.<target files> (atomically)"
     )

@@ -50,6 +50,7 @@ target could not hold is a number (the render error a richer form reaches), not 
 from __future__ import annotations
 
 import functools
+import math
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -106,16 +107,31 @@ LIGHT = np.array([3.0, 3.0, 4.0]) / 5.0
 PIXELS, SUBSAMPLES = 48, 3
 
 
+DARK = 0.05
+"""A channel whose measured albedo at normal view is below this fraction of the brightest
+channel's is not reported as a colour ratio (its ratio is noise over ~0)."""
+
+
 @dataclass(frozen=True)
 class RenderError:
     """Render-space error of a material against a measurement (module docstring):
-    ``albedo`` (RMS relative directional-albedo error), ``point`` (relative RMS of ``f
-    cos(theta_i)`` on in-plane point-light slices, the export's own error included),
-    ``ratio`` (fit / data albedo at normal view, R, G, B)."""
+    ``albedo`` (relative error of the directional albedo over views and channels),
+    ``point`` (relative error of the point-light sphere, the export's own error
+    included), ``fit_rgb`` and ``data_rgb`` (the albedo at normal view, R, G, B)."""
 
     albedo: float
     point: float
-    ratio: tuple[float, float, float]
+    fit_rgb: tuple[float, float, float]
+    data_rgb: tuple[float, float, float]
+
+    @property
+    def ratio(self) -> tuple[float, ...]:
+        """Fit over data albedo at normal view per channel (``nan`` for a :data:`DARK` one)."""
+        top = max(self.data_rgb)
+        return tuple(
+            f / d if d > DARK * top else math.nan
+            for f, d in zip(self.fit_rgb, self.data_rgb, strict=True)
+        )
 
     @property
     def score(self) -> float:
@@ -181,7 +197,8 @@ class Material:
         if ref is not None:
             gain = 1.0 - ref.error.score / max(c.error.score, 1e-300)
             verdict = (
-                f"a richer form ({ref.spec}, which {self.target} cannot hold) would lower "
+                f"a richer form ({ref.spec}, which {self.target} holds at best "
+                "approximately) would lower "
                 f"the score by {100 * gain:.0f}%: {ref.error.text()}"
                 if gain > SCORE_TOLERANCE
                 else f"a richer form ({ref.spec}) would not lower the score: the target "
@@ -191,7 +208,7 @@ class Material:
         off = [
             f"{ch} {100 * (r - 1):+.0f}%"
             for ch, r in zip("RGB", c.error.ratio, strict=True)
-            if abs(r - 1) > 0.1
+            if not math.isnan(r) and abs(r - 1) > 0.1
         ]
         if off:
             out.append(f"albedo at normal view off by more than 10%: {', '.join(off)}")
@@ -274,7 +291,6 @@ def render_error(data: Measurements, fitted: FitResult, export_error: float = 0.
     views = len(ALBEDO_VIEWS_DEG)
     cos = (wi[:, 2] * weight)[:, None]
     a_f, a_d = ((x * cos).reshape(views, -1, 3).sum(axis=1) for x in (f, d))
-    ratio = a_f[0] / np.maximum(a_d[0], 1e-12)
     wi, wo, pixel = _sphere_pairs()
     f, d = both(wi, wo)
     cos = np.maximum(wi[:, 2:3], 0.0)
@@ -282,7 +298,8 @@ def render_error(data: Measurements, fitted: FitResult, export_error: float = 0.
     img_f, img_d = (np.stack([np.bincount(pixel, (x * cos)[:, c], n) for c in range(3)], 1)
                     for x in (f, d))  # fmt: skip
     point = _pooled(img_f, img_d) + export_error
-    return RenderError(_pooled(a_f, a_d), float(point), tuple(float(x) for x in ratio))
+    rgb = tuple(tuple(float(x) for x in a[0]) for a in (a_f, a_d))
+    return RenderError(_pooled(a_f, a_d), float(point), *rgb)
 
 
 def _fit_form(

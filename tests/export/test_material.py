@@ -72,7 +72,7 @@ def test_a_lobe_narrower_than_a_pixel_adds_only_what_it_shows(matte):
 def test_choose_takes_the_simplest_form_within_the_tolerance():
     def form(k: int, score: float) -> Form:
         r = dataclasses.replace(_lambert_result(KD), n_free=k)
-        return Form(f"f{k}", r, None, RenderError(score, 0.0, (1.0, 1.0, 1.0)), 0.0)
+        return Form(f"f{k}", r, None, RenderError(score, 0.0, (1.0,) * 3, (1.0,) * 3), 0.0)
 
     forms = [form(3, 0.100), form(9, 0.100 * (1 - SCORE_TOLERANCE / 2)), form(12, 0.05)]
     assert choose(forms).spec == "f12"  # a real gain
