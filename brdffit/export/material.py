@@ -35,9 +35,12 @@ Fits may run on a strided grid, but scores are read from the full-resolution gri
 stands for its whole cell, and near a highlight that step is part of the point-light
 error.
 
-An export that is not exact (``Export.exact`` false) adds its own relative error of
-``f cos(theta_i)`` against the fit to the point-light error: by the triangle inequality
-the written material's error is at most the sum. The score is albedo error plus
+An export that is not exact (``Export.exact`` false) adds its own errors against the fit:
+its relative error of ``f cos(theta_i)`` to the point-light error and its albedo error
+(:func:`brdffit.export._match.albedo_error`) to the albedo error; by the triangle
+inequality the written material's error is at most about the sum. (Without the albedo
+term, a two-lobe fit of RGL satin_rosaline whose nested blend had to darken the diffuse
+was chosen and rendered at 0.58-0.67 of the measured brightness.) The score is albedo error plus
 point-light error. The form chosen is the one with the fewest free parameters among
 those whose score is within :data:`SCORE_TOLERANCE` of the least: a feature stays only
 when a render would show it.
@@ -275,9 +278,11 @@ def _pooled(fit: np.ndarray, data: np.ndarray) -> float:
     return float(np.linalg.norm(fit - data) / max(np.linalg.norm(data), 1e-300))
 
 
-def render_error(data: Measurements, fitted: FitResult, export_error: float = 0.0) -> RenderError:
-    """The render-space error of ``fitted`` against ``data`` (module docstring);
-    ``export_error`` (an inexact export's relative error) is added to the point error."""
+def render_error(
+    data: Measurements, fitted: FitResult, export: Export | None = None
+) -> RenderError:
+    """The render-space error of ``fitted`` against ``data`` (module docstring); an
+    inexact ``export`` of it adds its own errors."""
     merl_stride(data)  # a MeasurementsError naming the file when it is not on a MERL grid
     model = models.model_of(fitted)
     params = {k: np.asarray(v) for k, v in fitted.params.items()}
@@ -297,9 +302,9 @@ def render_error(data: Measurements, fitted: FitResult, export_error: float = 0.
     n = pixel.max() + 1
     img_f, img_d = (np.stack([np.bincount(pixel, (x * cos)[:, c], n) for c in range(3)], 1)
                     for x in (f, d))  # fmt: skip
-    point = _pooled(img_f, img_d) + export_error
+    extra = (0.0, 0.0) if export is None or export.exact else (export.albedo_error, export.error)
     rgb = tuple(tuple(float(x) for x in a[0]) for a in (a_f, a_d))
-    return RenderError(_pooled(a_f, a_d), float(point), *rgb)
+    return RenderError(_pooled(a_f, a_d) + extra[0], _pooled(img_f, img_d) + extra[1], *rgb)
 
 
 def _fit_form(
@@ -315,7 +320,7 @@ def _fit_form(
     if not np.isfinite(r.loss):
         raise ExportError(f"{data.source}: the fit of {spec} failed ({r.status.value})")
     e = export(r, target) if target is not None else None
-    err = render_error(measured, r, 0.0 if e is None or e.exact else e.error)
+    err = render_error(measured, r, e)
     return Form(spec, r, e, err, time.perf_counter() - t0)
 
 
