@@ -16,7 +16,8 @@ Targets (issue 43): env rel RMSE <= 0.10 with every colour ratio in [0.90, 1.10]
 the form is exact.
 
 Resumable: one JSON per file in ``--state`` (written atomically); a file already there is
-not run again. The Markdown table is written from every JSON at the end.
+not run again. The Markdown table is written from every JSON at the end, followed by
+``<out>.notes.md`` (what the pictures show, written by whoever looked at them).
 
     nice python -m benchmarks.material_check /work/rgl_data/*.bsdf \\
         [--stride 5 5 9] [--res 48] [--spp 128] [--png NAME ...] \\
@@ -212,7 +213,9 @@ def main(argv: Sequence[str] | None = None) -> None:
             flush=True,
         )
     results = [json.loads(p.read_text()) for p in sorted(args.state.glob("*.json"))]
-    write_text(args.out, "\n".join(["# Material check", "", *table(results), ""]))
+    notes = args.out.with_suffix(".notes.md")  # what the pictures show, written by hand
+    tail = [notes.read_text()] if notes.exists() else []
+    write_text(args.out, "\n".join(["# Material check", "", *table(results), "", *tail]))
 
 
 if __name__ == "__main__":
