@@ -130,6 +130,13 @@ def beckmann_lambda_rational(v: jax.Array, alpha_x: jax.Array, alpha_y: jax.Arra
     return jnp.where(a < 1.6, lam, 0.0)
 
 
+CHARLIE_FLOOR = 1e-30
+"""Floor of ``sin^2 theta_h`` in :func:`charlie_d` for the glTF sheen (walter's and the glTF
+model's): keeps ``0 log 0`` out of the derivative at ``theta_h = 0``, where ``D`` is 0;
+the value it adds there, ``(1e-30)^(1/(2a))`` times the normalisation, is below 1e-12
+1/sr for every ``a <= 1``. (Filament's own floor, 2^-7, changes the lobe.)"""
+
+
 def charlie_d(h: jax.Array, a: jax.Array, floor: float) -> jax.Array:
     """Charlie sheen NDF (Estevez and Kulla 2017, "Production Friendly Microfacet Sheen
     BRDF", eq. 2), 1/sr, (N,): ``(2 + 1/a) (sin^2 theta_h)^(1/(2a)) / (2 pi)``.

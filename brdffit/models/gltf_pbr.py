@@ -36,10 +36,10 @@ Bounds: ``roughness`` and ``clearcoat_roughness`` from 0.01 (alpha 1e-4, the flo
 while real-time viewers clamp higher (Filament at 0.045), so a fit below that renders
 sharper in a path tracer than in those viewers. ``sheen_roughness`` from 0.045, where
 Filament clamps it (``MIN_PERCEPTUAL_ROUGHNESS``): ``1/a`` in ``D_charlie`` has no floor of
-its own. Singularity guard: ``sin^2 theta_h`` is computed as ``hx^2 + hy^2`` and, at 0
-(``h`` = normal, also every placeholder pair below the horizon), the power is 0 through a
-double ``where``, so neither the value nor ``d/d(sheen_roughness)`` (``log sin^2``) meets
-``log 0``. No floor on ``sin^2`` (Filament's ``2^-7`` would change the BRDF the spec
+its own. Singularity guard: ``sin^2 theta_h = hx^2 + hy^2`` is floored at 1e-30
+(:data:`~brdffit.models._terms.CHARLIE_FLOOR`), so ``d/d(sheen_roughness)`` (``log
+sin^2``) never meets ``log 0`` at ``h`` = normal; the lobe gains below 1e-12 1/sr there,
+where the spec's is 0 (Filament's floor, ``2^-7``, would change the BRDF the spec
 defines).
 
 Affine (linear least squares per start): ``base_color`` and ``sheen_color``, jointly:
@@ -114,12 +114,9 @@ def ggx_dv(g: ShadingGeometry, alpha: jax.Array) -> jax.Array:
 
 def charlie_d(h: jax.Array, a: jax.Array) -> jax.Array:
     """Charlie sheen NDF ``(2 + 1/a) sin(theta_h)^(1/a) / (2 pi)`` (1/sr), (N,), of unit
-    half vectors ``h`` (N, 3); no floor on ``sin^2 theta_h`` (module docstring: the guard
-    at ``theta_h = 0``)."""
-    sin2 = h[:, 0] ** 2 + h[:, 1] ** 2
-    pos = sin2 > 0
-    power = jnp.where(pos, jnp.exp(0.5 / a * jnp.log(jnp.where(pos, sin2, 1.0))), 0.0)
-    return (2.0 + 1.0 / a) * power * (0.5 * _terms.INV_PI)
+    half vectors ``h`` (N, 3): :func:`~brdffit.models._terms.charlie_d` with
+    :data:`~brdffit.models._terms.CHARLIE_FLOOR` (module docstring)."""
+    return _terms.charlie_d(h, a, _terms.CHARLIE_FLOOR)
 
 
 def charlie_sheen(g: ShadingGeometry, a: jax.Array) -> jax.Array:

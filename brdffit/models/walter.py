@@ -63,7 +63,8 @@ that is off has no parameter and no operation):
   1/a) sin(theta_h)^(1/a) / (2 pi)``, ``V_neubelt = 1 / (4 (cos_i + cos_o - cos_i
   cos_o))`` (Neubelt and Pettineo 2013). As in ``KHR_materials_sheen``'s reference without
   its optional albedo scaling of the base (which needs a tabulated albedo), so a glTF
-  export carries the lobe as it is. ``sin^2 theta_h`` is floored at :data:`SHEEN_FLOOR`.
+  export carries the lobe as it is. ``sin^2 theta_h`` is floored at
+  :data:`~brdffit.models._terms.CHARLIE_FLOOR`.
 * ``clearcoat``: glTF's ``KHR_materials_clearcoat`` layer over everything above:
   ``f = (1 - c F_c) f_base + c F_c D_c V_c``, ``F_c = 0.04 + 0.96 (1 - cos_o)^5`` (an
   IOR 1.5 coat, Schlick at the viewer's ``N.V`` as the extension's reference writes it:
@@ -127,10 +128,6 @@ and the range of its figures (to 1200 nm, where the colours have faded to pastel
 FILM_IOR = Parameter("film_ior", (), (1.0, 2.5), 1.3, "logit", "thin-film index, unitless")
 """Default ``KHR_materials_iridescence``'s 1.3; up to 2.5 (titanium dioxide); >= 1, the
 index of the air above, so the film has no total internal reflection."""
-SHEEN_FLOOR = 1e-30
-"""Floor of ``sin^2 theta_h`` in the sheen's Charlie ``D``: keeps ``0 log 0`` out of its
-derivative at ``theta_h = 0``, where ``D`` is 0; the value it adds there,
-``(1e-30)^(1/(2a))`` times the normalisation, is below 1e-12 for every ``a <= 1``."""
 COAT_F0 = 0.04
 """Normal-incidence reflectance of the coat: ``KHR_materials_clearcoat``'s IOR 1.5."""
 
@@ -263,7 +260,7 @@ class Walter(AbstractModel):
             f = f + _terms.lambert(params["kd"])
         if self.sheen:
             a = params["sheen_roughness"] ** 2
-            d = _terms.charlie_d(g.h, a, SHEEN_FLOOR) * _terms.neubelt_v(g.cos_i, g.cos_o)
+            d = _terms.charlie_d(g.h, a, _terms.CHARLIE_FLOOR) * _terms.neubelt_v(g.cos_i, g.cos_o)
             f = f + params["sheen_color"][None, :] * d[:, None]
         if self.clearcoat:
             a = params["clearcoat_alpha"]

@@ -24,7 +24,6 @@ from scipy import integrate
 
 from brdffit import models
 from brdffit.models import _terms
-from brdffit.models.walter import SHEEN_FLOOR
 from tests.export.test_export import gltf_brdf
 from tests.helpers import random_pairs
 
@@ -80,7 +79,7 @@ def test_sheen_and_clear_coat_equal_the_gltf_reference(sheen, coat):
 @pytest.mark.parametrize("roughness", [0.1, 0.3, 0.6, 1.0])
 def test_charlie_distribution_is_normalised(roughness):
     a = jnp.asarray(roughness**2)
-    d = jax.jit(lambda h: _terms.charlie_d(h, a, SHEEN_FLOOR))
+    d = jax.jit(lambda h: _terms.charlie_d(h, a, _terms.CHARLIE_FLOOR))
 
     def integrand(theta: float) -> float:
         h = jnp.array([[math.sin(theta), 0.0, math.cos(theta)]])
