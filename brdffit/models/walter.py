@@ -148,7 +148,7 @@ def _indexed(p: Parameter, suffix: str, **change: object) -> Parameter:
 @final
 class Walter(AbstractModel):
     """Microfacet BRDF (GGX by default) with Smith masking, Schlick Fresnel, a specular
-    weight and Lambert; optionally several lobes, a sheen and a clear coat."""
+    weight and Lambert; optionally several lobes, a thin film, a sheen and a clear coat."""
 
     distribution: Literal["ggx", "beckmann"] = eqx.field(static=True, default="ggx")
     masking: Literal["uncorrelated", "height_correlated"] = eqx.field(
