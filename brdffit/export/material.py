@@ -278,39 +278,65 @@ def _pooled(fit: np.ndarray, data: np.ndarray) -> float:
     return float(np.linalg.norm(fit - data) / max(np.linalg.norm(data), 1e-300))
 
 
+def _albedos(f: np.ndarray) -> np.ndarray:
+    """Directional albedos (views, 3) of values ``f`` at :func:`_albedo_pairs`."""
+    wi, _, weight = _albedo_pairs()
+    return (f * (wi[:, 2] * weight)[:, None]).reshape(len(ALBEDO_VIEWS_DEG), -1, 3).sum(axis=1)
+
+
+def _sphere_image(f: np.ndarray) -> np.ndarray:
+    """Point-light sphere pixels (P, 3) of values ``f`` at :func:`_sphere_pairs` (each pixel
+    the sum over its points, which the relative error does not see)."""
+    wi, _, pixel = _sphere_pairs()
+    fc = f * np.maximum(wi[:, 2:3], 0.0)
+    return np.stack([np.bincount(pixel, fc[:, c], pixel.max() + 1) for c in range(3)], axis=1)
+
+
+@dataclass(frozen=True, eq=False)
+class Measured:
+    """The measurement's side of :func:`render_error`, read once per file: its albedos
+    (views, 3) and point-light sphere (P, 3), by nearest bin with the reader's missing
+    channels filled (:func:`brdffit.io.merl_grid.nearest_bin`, a distance transform over
+    the whole grid per call, so not once per form)."""
+
+    albedo: np.ndarray
+    sphere: np.ndarray
+
+    @classmethod
+    def of(cls, data: Measurements) -> Measured:
+        """Raises :class:`~brdffit.errors.MeasurementsError` naming the file when ``data``
+        is not on a MERL grid."""
+        merl_stride(data)
+        wi, wo, _ = _albedo_pairs()
+        albedo = _albedos(nearest_bin(data, wi, wo, fill=True))
+        wi, wo, _ = _sphere_pairs()
+        return cls(albedo, _sphere_image(nearest_bin(data, wi, wo, fill=True)))
+
+
 def render_error(
-    data: Measurements, fitted: FitResult, export: Export | None = None
+    data: Measurements | Measured, fitted: FitResult, export: Export | None = None
 ) -> RenderError:
-    """The render-space error of ``fitted`` against ``data`` (module docstring); an
-    inexact ``export`` of it adds its own errors."""
-    merl_stride(data)  # a MeasurementsError naming the file when it is not on a MERL grid
+    """The render-space error of ``fitted`` against ``data`` (module docstring; pass
+    :class:`Measured` to read the data once for several fits); an inexact ``export`` of
+    it adds its own errors."""
+    ref = data if isinstance(data, Measured) else Measured.of(data)
     model = models.model_of(fitted)
     params = {k: np.asarray(v) for k, v in fitted.params.items()}
-
-    def both(wi: np.ndarray, wo: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        f = np.asarray(model.eval(params, wi, wo), float)
-        return f, nearest_bin(data, wi, wo, fill=True)
-
-    wi, wo, weight = _albedo_pairs()
-    f, d = both(wi, wo)
-    views = len(ALBEDO_VIEWS_DEG)
-    cos = (wi[:, 2] * weight)[:, None]
-    a_f, a_d = ((x * cos).reshape(views, -1, 3).sum(axis=1) for x in (f, d))
-    wi, wo, pixel = _sphere_pairs()
-    f, d = both(wi, wo)
-    cos = np.maximum(wi[:, 2:3], 0.0)
-    n = pixel.max() + 1
-    img_f, img_d = (np.stack([np.bincount(pixel, (x * cos)[:, c], n) for c in range(3)], 1)
-                    for x in (f, d))  # fmt: skip
+    wi, wo, _ = _albedo_pairs()
+    albedo = _albedos(np.asarray(model.eval(params, wi, wo), float))
+    wi, wo, _ = _sphere_pairs()
+    sphere = _sphere_image(np.asarray(model.eval(params, wi, wo), float))
     extra = (0.0, 0.0) if export is None or export.exact else (export.albedo_error, export.error)
-    rgb = tuple(tuple(float(x) for x in a[0]) for a in (a_f, a_d))
-    return RenderError(_pooled(a_f, a_d) + extra[0], _pooled(img_f, img_d) + extra[1], *rgb)
+    rgb = tuple(tuple(float(x) for x in a[0]) for a in (albedo, ref.albedo))
+    return RenderError(
+        _pooled(albedo, ref.albedo) + extra[0], _pooled(sphere, ref.sphere) + extra[1], *rgb
+    )
 
 
 def _fit_form(
     spec: str,
     data: Measurements,
-    measured: Measurements,
+    measured: Measured,
     target: str | None,
     cut_deg: float,
     seed: int,
@@ -356,12 +382,14 @@ def best_material(
     :class:`~brdffit.errors.MeasurementsError` for data off a MERL grid,
     :class:`~brdffit.errors.ParameterError` for a bad form spec (before any fit).
     """
-    (target,) = parse_targets(target) if target else ("",)
+    targets = parse_targets(target)
+    if len(targets) != 1:
+        raise ExportError(f"material: one target, not {target!r}; choose from {', '.join(FORMS)}")
+    target = targets[0]
     specs = tuple(forms) if forms else FORMS[target]
     for s in (*specs, *((reference,) if reference else ())):
         models.from_spec(s)  # a bad spec fails here, before minutes of fitting
-    measured = data if measured is None else measured
-    merl_stride(measured)
+    measured = Measured.of(data if measured is None else measured)
     say = progress or (lambda _line: None)
     done = []
     for i, spec in enumerate(specs, 1):

@@ -57,9 +57,45 @@ def lambert(albedo: jax.Array) -> jax.Array:
     return albedo[None, :] * INV_PI
 
 
+def schlick_weight(cos: jax.Array) -> jax.Array:
+    """Schlick's weight ``(1 - cos)^5`` (cos in [0, 1] above the horizon; no clamp needed);
+    Disney's shader ``SchlickFresnel`` and Mitsuba's ``schlick_weight``."""
+    return (1.0 - cos) ** 5
+
+
+def luminance_tint(c: jax.Array, weights: tuple[float, float, float]) -> jax.Array:
+    """``C / lum(C)`` with ``lum`` the ``weights`` of R, G, B, and 1 where ``lum = 0``; (3,).
+    Disney 2012 uses (.3, .6, .1), Mitsuba's principled Rec. 709 (.212671, .715160, .072169)."""
+    lum = weights[0] * c[0] + weights[1] * c[1] + weights[2] * c[2]
+    return jnp.where(lum > 0, c / jnp.where(lum > 0, lum, 1.0), 1.0)
+
+
+def hanrahan_krueger(fss: jax.Array, cos_sum: jax.Array) -> jax.Array:
+    """Disney's subsurface shape ``1.25 (Fss (1 / (cos_i + cos_o) - .5) + .5)`` (Mitsuba's
+    ``flatness`` target ``f_ss``)."""
+    return 1.25 * (fss * (1.0 / cos_sum - 0.5) + 0.5)
+
+
+def gtr1(sin2_h: jax.Array, alpha: jax.Array) -> jax.Array:
+    """GTR1 ``(a^2 - 1) / (pi log(a^2) t)`` (1/sr) as ``u / log1p(u)``, with a series at u = 0."""
+    a2 = alpha * alpha
+    u = a2 - 1.0
+    small = jnp.abs(u) < 1e-4  # series error u^3/24 < 5e-14
+    u_safe = jnp.where(small, -0.5, u)
+    ratio = jnp.where(small, 1.0 + u * (0.5 - u / 12.0), u_safe / jnp.log1p(u_safe))
+    return INV_PI * ratio / (a2 - u * sin2_h)  # t = 1 + u cos^2 = a^2 - u sin^2
+
+
+def ggx_dv(h: jax.Array, wi: jax.Array, wo: jax.Array, alpha: jax.Array) -> jax.Array:
+    """Isotropic GGX ``D`` times height-correlated Smith ``G2 / (4 cos_i cos_o)`` (1/sr),
+    (N,): glTF's ``D V`` (Appendix B), its clear coat's, and walter's coat."""
+    g2 = smith_g(ggx_lambda(wi, alpha, alpha), ggx_lambda(wo, alpha, alpha), height_correlated=True)
+    return ggx_d(h, alpha, alpha) * g2 / (4.0 * wi[:, 2] * wo[:, 2])
+
+
 def schlick_fresnel(f0: jax.Array, cos_d: jax.Array) -> jax.Array:
     """Schlick (1994): ``F0 + (1 - F0)(1 - cos_d)^5``; ``f0`` (3,) and ``cos_d`` (N,) -> (N, 3)."""
-    s = (1.0 - cos_d) ** 5
+    s = schlick_weight(cos_d)
     return f0[None, :] * (1.0 - s)[:, None] + s[:, None]
 
 

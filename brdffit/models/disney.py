@@ -47,7 +47,11 @@ import jax.numpy as jnp
 from brdffit.core.abstract_model import AbstractModel
 from brdffit.core.geometry import ShadingGeometry
 from brdffit.core.parameters import Parameter, Params
+from brdffit.models import _terms
 from brdffit.models._terms import DIELECTRIC_F0, INV_PI, ggx_d
+
+LUMINANCE = (0.3, 0.6, 0.1)
+"""Disney 2012's luminance weights of the tint ``C_tint = C / C_lum``."""
 
 
 def _unit(
@@ -80,41 +84,15 @@ CLEARCOAT = _unit("clearcoat", 0.1, "clear-coat strength (lobe scaled by 1/4), u
 CLEARCOAT_GLOSS = _unit("clearcoat_gloss", 0.9, "clear-coat gloss, alpha = mix(.1, .001, .)")
 
 
-def schlick_weight(cos: jax.Array) -> jax.Array:
-    """Shader ``SchlickFresnel``: ``(1 - cos)^5`` (cos in [0, 1], so no clamp is needed)."""
-    return (1.0 - cos) ** 5
-
-
 def mix_product(f90_minus_1: jax.Array, f_l: jax.Array, f_v: jax.Array) -> jax.Array:
     """``mix(1, F90, F_L) mix(1, F90, F_V)`` from ``F90 - 1``: the Fd and Fss factors."""
     return (1.0 + f90_minus_1 * f_l) * (1.0 + f90_minus_1 * f_v)
-
-
-def hanrahan_krueger(fss: jax.Array, cos_sum: jax.Array) -> jax.Array:
-    """Subsurface shape ``1.25 (Fss (1 / (cos_i + cos_o) - .5) + .5)``."""
-    return 1.25 * (fss * (1.0 / cos_sum - 0.5) + 0.5)
-
-
-def luminance_tint(c: jax.Array) -> jax.Array:
-    """``C / C_lum`` with ``C_lum = .3 C_r + .6 C_g + .1 C_b``, and 1 where ``C_lum = 0``."""
-    lum = 0.3 * c[0] + 0.6 * c[1] + 0.1 * c[2]
-    return jnp.where(lum > 0, c / jnp.where(lum > 0, lum, 1.0), 1.0)
 
 
 def gtr2(sin2_h: jax.Array, a2: jax.Array) -> jax.Array:
     """Isotropic GTR2 (GGX) ``a^2 / (pi t^2)``, ``t = a^2 + (1 - a^2) sin^2(theta_h)`` (1/sr)."""
     t = a2 + (1.0 - a2) * sin2_h
     return a2 / (jnp.pi * t * t)
-
-
-def gtr1(sin2_h: jax.Array, alpha: jax.Array) -> jax.Array:
-    """GTR1 ``(a^2 - 1) / (pi log(a^2) t)`` (1/sr) as ``u / log1p(u)``, with a series at u = 0."""
-    a2 = alpha * alpha
-    u = a2 - 1.0
-    small = jnp.abs(u) < 1e-4  # series error u^3/24 < 5e-14
-    u_safe = jnp.where(small, -0.5, u)
-    ratio = jnp.where(small, 1.0 + u * (0.5 - u / 12.0), u_safe / jnp.log1p(u_safe))
-    return INV_PI * ratio / (a2 - u * sin2_h)  # t = 1 + u cos^2 = a^2 - u sin^2
 
 
 def smith_g_ggx(cos: jax.Array, a2: jax.Array | float) -> jax.Array:
@@ -177,14 +155,18 @@ class Disney(AbstractModel):
 
     def core(self, params: Params, g: ShadingGeometry) -> jax.Array:
         c = params["base_color"]
-        f_l, f_v, f_h = schlick_weight(g.cos_i), schlick_weight(g.cos_o), schlick_weight(g.cos_d)
+        f_l, f_v, f_h = (
+            _terms.schlick_weight(g.cos_i),
+            _terms.schlick_weight(g.cos_o),
+            _terms.schlick_weight(g.cos_d),
+        )
         fss90 = params["roughness"] * g.cos_d**2
         fd = mix_product(2.0 * fss90 - 0.5, f_l, f_v)  # Fd90 - 1 = 2 cos_d^2 r - .5
         if self.subsurface:
-            ss = hanrahan_krueger(mix_product(fss90 - 1.0, f_l, f_v), g.cos_i + g.cos_o)
+            ss = _terms.hanrahan_krueger(mix_product(fss90 - 1.0, f_l, f_v), g.cos_i + g.cos_o)
             fd = fd + params["subsurface"] * (ss - fd)
         out = c[None, :] * (INV_PI * fd)[:, None]
-        tint = luminance_tint(c) if (self.sheen or self.specular_tint) else None
+        tint = _terms.luminance_tint(c, LUMINANCE) if (self.sheen or self.specular_tint) else None
         if self.sheen:  # C_sheen = mix(1, C_tint, sheen_tint)
             c_sheen = 1.0 + params["sheen_tint"] * (tint - 1.0)
             out = out + (params["sheen"] * f_h)[:, None] * c_sheen[None, :]
@@ -204,6 +186,6 @@ class Disney(AbstractModel):
         if self.clearcoat:
             alpha = 0.1 + params["clearcoat_gloss"] * (0.001 - 0.1)
             g_r = smith_g_ggx(g.cos_i, 0.0625) * smith_g_ggx(g.cos_o, 0.0625)  # alpha_g .25
-            lobe = gtr1(sin2_h, alpha) * g_r * (0.04 + 0.96 * f_h)
+            lobe = _terms.gtr1(sin2_h, alpha) * g_r * (0.04 + 0.96 * f_h)
             out = out + (0.25 * params["clearcoat"] * lobe)[:, None]
         return out

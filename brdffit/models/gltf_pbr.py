@@ -101,17 +101,6 @@ SHEEN_COLOR = _color("sheen_color", 0.2, "sheenColorFactor, RGB", linear=True)
 SHEEN_ROUGHNESS = _rough("sheen_roughness", 0.045, 0.5, "sheenRoughnessFactor, a = r^2")
 
 
-def ggx_dv(g: ShadingGeometry, alpha: jax.Array) -> jax.Array:
-    """Appendix B's ``D V``: isotropic GGX times height-correlated Smith ``G2 / (4 N.L
-    N.V)`` (1/sr), (N,)."""
-    g2 = _terms.smith_g(
-        _terms.ggx_lambda(g.wi, alpha, alpha),
-        _terms.ggx_lambda(g.wo, alpha, alpha),
-        height_correlated=True,
-    )
-    return _terms.ggx_d(g.h, alpha, alpha) * g2 / (4.0 * g.cos_i * g.cos_o)
-
-
 def charlie_d(h: jax.Array, a: jax.Array) -> jax.Array:
     """Charlie sheen NDF ``(2 + 1/a) sin(theta_h)^(1/a) / (2 pi)`` (1/sr), (N,), of unit
     half vectors ``h`` (N, 3): :func:`~brdffit.models._terms.charlie_d` with
@@ -152,7 +141,7 @@ class GltfPbr(AbstractModel):
 
     def core(self, params: Params, g: ShadingGeometry) -> jax.Array:
         base, m = params["base_color"][None, :], params["metallic"]
-        dv = ggx_dv(g, params["roughness"] ** 2)[:, None]
+        dv = _terms.ggx_dv(g.h, g.wi, g.wo, params["roughness"] ** 2)[:, None]
         w = ((1.0 - g.cos_d) ** 5)[:, None]
         if self.specular:
             s, f0 = params["specular"], params["specular_f0"]
@@ -168,6 +157,6 @@ class GltfPbr(AbstractModel):
             out = out + params["sheen_color"][None, :] * lobe[:, None]
         if self.clearcoat:
             fc = params["clearcoat"] * (COAT_F0 + (1.0 - COAT_F0) * (1.0 - g.cos_o) ** 5)
-            coat = ggx_dv(g, params["clearcoat_roughness"] ** 2)
+            coat = _terms.ggx_dv(g.h, g.wi, g.wo, params["clearcoat_roughness"] ** 2)
             out = out * (1.0 - fc)[:, None] + (fc * coat)[:, None]
         return out

@@ -61,6 +61,7 @@ import jax.numpy as jnp
 from brdffit.core.abstract_model import AbstractModel
 from brdffit.core.geometry import ShadingGeometry
 from brdffit.core.parameters import Parameter, Params
+from brdffit.models import _terms
 from brdffit.models._terms import (
     INV_PI,
     fresnel_dielectric,
@@ -110,41 +111,18 @@ CLEARCOAT = _unit("clearcoat", 0.1, "clear-coat strength (lobe scaled by 1/4)", 
 CLEARCOAT_GLOSS = _unit("clearcoat_gloss", 0.5, "clear-coat gloss, alpha = lerp(.1, .001, .)")
 
 
-def schlick_weight(cos: jax.Array) -> jax.Array:
-    """Mitsuba's ``schlick_weight``: ``(1 - cos)^5`` (cos in [0, 1] above the horizon)."""
-    return (1.0 - cos) ** 5
-
-
-def rec709_tint(c: jax.Array) -> jax.Array:
-    """``C_tint = C / lum`` with Mitsuba's Rec. 709 luminance, and 1 where ``lum = 0``; (3,)."""
-    lum = REC709[0] * c[0] + REC709[1] * c[1] + REC709[2] * c[2]
-    return jnp.where(lum > 0, c / jnp.where(lum > 0, lum, 1.0), 1.0)
-
-
 def principled_diffuse(
     g: ShadingGeometry, roughness: jax.Array, flatness: jax.Array | None
 ) -> jax.Array:
     """``lerp(f_diff + f_retro, f_ss, flatness)`` (unitless, (N,)); no ``f_ss`` when ``None``."""
-    w_i, w_o = schlick_weight(g.cos_i), schlick_weight(g.cos_o)
+    w_i, w_o = _terms.schlick_weight(g.cos_i), _terms.schlick_weight(g.cos_o)
     rr = 2.0 * roughness * g.cos_d**2
     lobe = (1.0 - 0.5 * w_i) * (1.0 - 0.5 * w_o) + rr * (w_i + w_o + w_i * w_o * (rr - 1.0))
     if flatness is None:
         return lobe
     fss = (1.0 + (0.5 * rr - 1.0) * w_i) * (1.0 + (0.5 * rr - 1.0) * w_o)
-    f_ss = 1.25 * (fss * (1.0 / (g.cos_i + g.cos_o) - 0.5) + 0.5)
+    f_ss = _terms.hanrahan_krueger(fss, g.cos_i + g.cos_o)
     return lobe + flatness * (f_ss - lobe)
-
-
-def gtr1(h: jax.Array, alpha: jax.Array) -> jax.Array:
-    """GTR1 ``(a^2 - 1) / (pi ln(a^2) (a^2 cos_h^2 + sin_h^2))`` (1/sr), ``a <= 0.1``; (N,)."""
-    a2 = alpha * alpha
-    t = a2 * h[:, 2] ** 2 + (h[:, 0] ** 2 + h[:, 1] ** 2)
-    return (a2 - 1.0) * INV_PI / (jnp.log(a2) * t)
-
-
-def smith_g1_ggx(v: jax.Array, ax: jax.Array, ay: jax.Array) -> jax.Array:
-    """Mitsuba's GGX ``smith_g1``: ``2 / (1 + sqrt(1 + alpha^2 tan^2)) = 1 / (1 + Lambda)``."""
-    return 1.0 / (1.0 + ggx_lambda(v, ax, ay))
 
 
 @final
@@ -232,11 +210,11 @@ class MitsubaPrincipled(AbstractModel):
 
     def core(self, params: Params, g: ShadingGeometry) -> jax.Array:
         c = params["base_color"]
-        tint = rec709_tint(c) if (self.spec_tint or self.sheen_tint) else None
+        tint = _terms.luminance_tint(c, REC709) if (self.spec_tint or self.sheen_tint) else None
         flat = params["flatness"] if self.flatness else None
         body = c[None, :] * (INV_PI * principled_diffuse(g, params["roughness"], flat))[:, None]
         if self.sheen:
-            w = (params["sheen"] * schlick_weight(g.cos_d))[:, None]
+            w = (params["sheen"] * _terms.schlick_weight(g.cos_d))[:, None]
             if self.sheen_tint:  # C_sheen = lerp(1, C_tint, sheen_tint)
                 w = w * (1.0 + params["sheen_tint"] * (tint - 1.0))[None, :]
             body = body + w
@@ -246,7 +224,10 @@ class MitsubaPrincipled(AbstractModel):
         if self.clearcoat:
             alpha = 0.1 + params["clearcoat_gloss"] * (0.001 - 0.1)
             a = jnp.asarray(CLEARCOAT_ALPHA, g.wi.dtype)
-            g_cc = smith_g1_ggx(g.wi, a, a) * smith_g1_ggx(g.wo, a, a)
-            coat = gtr1(g.h, alpha) * g_cc * (0.04 + 0.96 * schlick_weight(g.cos_d))
+            g_cc = smith_g(ggx_lambda(g.wi, a, a), ggx_lambda(g.wo, a, a), height_correlated=False)
+            sin2_h = g.h[:, 0] ** 2 + g.h[:, 1] ** 2
+            coat = (
+                _terms.gtr1(sin2_h, alpha) * g_cc * (0.04 + 0.96 * _terms.schlick_weight(g.cos_d))
+            )
             out = out + (0.25 * params["clearcoat"] * coat)[:, None]
         return out

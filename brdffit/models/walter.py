@@ -263,11 +263,7 @@ class Walter(AbstractModel):
             d = _terms.charlie_d(g.h, a, _terms.CHARLIE_FLOOR) * _terms.neubelt_v(g.cos_i, g.cos_o)
             f = f + params["sheen_color"][None, :] * d[:, None]
         if self.clearcoat:
-            a = params["clearcoat_alpha"]
-            gc = _terms.smith_g(
-                _terms.ggx_lambda(g.wi, a, a), _terms.ggx_lambda(g.wo, a, a), height_correlated=True
-            )
-            coat = _terms.ggx_d(g.h, a, a) * gc / (4.0 * g.cos_i * g.cos_o)
+            coat = _terms.ggx_dv(g.h, g.wi, g.wo, params["clearcoat_alpha"])
             fc = params["clearcoat"] * (COAT_F0 + (1.0 - COAT_F0) * (1.0 - g.cos_o) ** 5)
             f = f * (1.0 - fc)[:, None] + (fc * coat)[:, None]
         return f

@@ -14,7 +14,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from brdffit import MeasurementsError, ParameterError, models, synthesize, write_merl
+from brdffit import ExportError, MeasurementsError, ParameterError, models, synthesize, write_merl
 from brdffit.cli import main
 from brdffit.core.result import FitResult
 from brdffit.export import export
@@ -102,6 +102,8 @@ def test_material_command_writes_the_chosen_form_and_says_what_it_is(tmp_path, c
 def test_bad_input_fails_before_any_fit(tmp_path, capsys, matte):
     with pytest.raises(ParameterError, match="unknown model"):
         best_material(matte, "gltf", forms=["gltf", "nosuchmodel"])
+    with pytest.raises(ExportError, match="one target"):
+        best_material(matte, "gltf,mitsuba")
     scattered = synthesize(models.get("lambert"), {"kd": KD}, grid="random", n=500)
     with pytest.raises(MeasurementsError, match="MERL grid"):
         best_material(scattered, "gltf", reference=None)
