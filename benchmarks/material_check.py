@@ -61,11 +61,11 @@ def _form_row(f) -> dict:
 def run_file(path: Path, stride, res: int, spp: int, png_dir: Path | None) -> dict:
     """Both targets' material runs and the Mitsuba render of one file, as a JSON-able dict."""
     import brdffit
-    from brdffit.export.material import best_material
+    from brdffit.export.material import Measured, best_material
 
     t0 = time.perf_counter()
     data = brdffit.read_rgl(path, stride=tuple(stride))
-    full = brdffit.read_rgl(path)
+    full = Measured.of(brdffit.read_rgl(path))  # the scores' side, read once for both
     out: dict = {"file": path.name, "read_s": time.perf_counter() - t0}
     mit = best_material(data, "mitsuba", measured=full)
     glt = best_material(data, "gltf", measured=full, reference=None)

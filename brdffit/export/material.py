@@ -365,7 +365,7 @@ def best_material(
     *,
     forms: Sequence[str] | None = None,
     reference: str | None = REFERENCE,
-    measured: Measurements | None = None,
+    measured: Measurements | Measured | None = None,
     cut_deg: float = 80.0,
     seed: int = 0,
     progress: Callable[[str], None] | None = None,
@@ -376,7 +376,8 @@ def best_material(
     :data:`FORMS`; ``prefix``: write ``PREFIX.<target files>`` (``write_exports``)
     when given; ``forms`` (specs) instead of :data:`FORMS` ``[target]``; ``reference``
     (a spec, or ``None`` for none); ``measured``: the data the scores read (module
-    docstring; default ``data``); ``cut_deg``, ``seed`` as :func:`brdffit.fit`;
+    docstring; default ``data``), or its :class:`Measured` side read once for several
+    targets; ``cut_deg``, ``seed`` as :func:`brdffit.fit`;
     ``progress`` called with one line before each fit.
     Raises :class:`~brdffit.errors.ExportError` for an unknown target or a failed fit,
     :class:`~brdffit.errors.MeasurementsError` for data off a MERL grid,
@@ -389,7 +390,8 @@ def best_material(
     specs = tuple(forms) if forms else FORMS[target]
     for s in (*specs, *((reference,) if reference else ())):
         models.from_spec(s)  # a bad spec fails here, before minutes of fitting
-    measured = Measured.of(data if measured is None else measured)
+    if not isinstance(measured, Measured):
+        measured = Measured.of(data if measured is None else measured)
     say = progress or (lambda _line: None)
     done = []
     for i, spec in enumerate(specs, 1):
