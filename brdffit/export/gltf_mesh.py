@@ -5,11 +5,12 @@ empty scene. :func:`add_sphere` adds what a scene needs (glTF 2.0 specification,
 sections 3.5 Scenes, 3.6 Buffers, 3.7 Meshes): one ``buffer`` embedded as a base64 data
 URI (no second file to lose), ``bufferViews`` for the vertex attributes (target
 ARRAY_BUFFER, 34962) and the indices (ELEMENT_ARRAY_BUFFER, 34963), ``accessors`` for
-``POSITION`` (float VEC3, with the ``min`` and ``max`` the specification requires),
-``NORMAL`` (unit float VEC3) and ``TEXCOORD_0`` (float VEC2), and unsigned-short triangle
+``POSITION`` (float VEC3, with the ``min`` and ``max`` the specification requires) and
+``NORMAL`` (unit float VEC3), and unsigned-short triangle
 indices (counter-clockwise seen from outside, the specification's front face), a
 ``mesh`` whose one primitive uses material 0, a ``node`` and the default ``scene``.
-Y is up (glTF's convention). Every view is 4-byte aligned.
+Y is up (glTF's convention). Every view is 4-byte aligned. No texture coordinates: the
+material has no textures, and the Khronos validator reports an unused ``TEXCOORD_0``.
 """
 
 from __future__ import annotations
@@ -25,31 +26,30 @@ UNSIGNED_SHORT = 5123
 TRIANGLES = 4
 
 
-def sphere(n_lat: int = 24, n_lon: int = 48) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Unit UV sphere: positions (V, 3) float32 (= normals), texture coordinates (V, 2)
-    and triangle indices (T, 3) uint16, counter-clockwise seen from outside, Y up."""
+def sphere(n_lat: int = 24, n_lon: int = 48) -> tuple[np.ndarray, np.ndarray]:
+    """Unit latitude-longitude sphere: positions (V, 3) float32 (= normals) and triangle
+    indices (T, 3), counter-clockwise seen from outside, Y up."""
     theta = np.linspace(0.0, np.pi, n_lat + 1)  # from +Y down
-    phi = np.linspace(0.0, 2.0 * np.pi, n_lon + 1)  # the seam column repeated for UVs
+    phi = np.linspace(0.0, 2.0 * np.pi, n_lon + 1)  # the seam column repeated
     t, p = np.meshgrid(theta, phi, indexing="ij")
     pos = np.stack([np.sin(t) * np.sin(p), np.cos(t), np.sin(t) * np.cos(p)], axis=-1)
-    uv = np.stack([p / (2.0 * np.pi), t / np.pi], axis=-1)
     idx = np.arange((n_lat + 1) * (n_lon + 1)).reshape(n_lat + 1, n_lon + 1)
     a, b = idx[:-1, :-1], idx[1:, :-1]  # a above b
     c, d = idx[1:, 1:], idx[:-1, 1:]
     tris = np.concatenate(
         [np.stack([a, b, c], -1)[:-1], np.stack([a, c, d], -1)[1:]], axis=0
     ).reshape(-1, 3)  # the degenerate triangles at the poles left out
-    return pos.reshape(-1, 3).astype(np.float32), uv.reshape(-1, 2).astype(np.float32), tris
+    return pos.reshape(-1, 3).astype(np.float32), tris
 
 
 def add_sphere(doc: dict) -> dict:
     """``doc`` (a glTF document with ``materials``) with a unit sphere using material 0
     (module docstring); ``doc`` itself is not changed."""
-    pos, uv, tris = sphere()
-    parts = [pos.tobytes(), pos.tobytes(), uv.tobytes(), tris.astype(np.uint16).tobytes()]
+    pos, tris = sphere()
+    parts = [pos.tobytes(), pos.tobytes(), tris.astype(np.uint16).tobytes()]
     views, offset = [], 0
     for k, part in enumerate(parts):
-        target = ELEMENT_ARRAY_BUFFER if k == 3 else ARRAY_BUFFER
+        target = ELEMENT_ARRAY_BUFFER if k == 2 else ARRAY_BUFFER
         views.append({"buffer": 0, "byteOffset": offset, "byteLength": len(part), "target": target})
         offset += len(part) + (-len(part) % 4)
     blob = b"".join(part + b"\0" * (-len(part) % 4) for part in parts)
@@ -57,12 +57,11 @@ def add_sphere(doc: dict) -> dict:
         {"bufferView": 0, "componentType": FLOAT, "count": len(pos), "type": "VEC3",
          "min": pos.min(axis=0).tolist(), "max": pos.max(axis=0).tolist()},
         {"bufferView": 1, "componentType": FLOAT, "count": len(pos), "type": "VEC3"},
-        {"bufferView": 2, "componentType": FLOAT, "count": len(uv), "type": "VEC2"},
-        {"bufferView": 3, "componentType": UNSIGNED_SHORT, "count": tris.size, "type": "SCALAR"},
+        {"bufferView": 2, "componentType": UNSIGNED_SHORT, "count": tris.size, "type": "SCALAR"},
     ]  # fmt: skip
     primitive = {
-        "attributes": {"POSITION": 0, "NORMAL": 1, "TEXCOORD_0": 2},
-        "indices": 3,
+        "attributes": {"POSITION": 0, "NORMAL": 1},
+        "indices": 2,
         "material": 0,
         "mode": TRIANGLES,
     }
