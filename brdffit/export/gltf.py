@@ -1,7 +1,8 @@
 """Export to glTF 2.0: a document holding one material (``pbrMetallicRoughness`` and the
-``KHR_materials_specular``, ``_ior``, ``_anisotropy``, ``_clearcoat``, ``_sheen`` extensions
-where they apply), evaluated with :mod:`brdffit.export.gltf_brdf`, on a unit sphere
-(:mod:`brdffit.export.gltf_mesh`) so that a viewer shows it.
+``KHR_materials_specular``, ``_ior``, ``_anisotropy``, ``_clearcoat``, ``_sheen``,
+``_iridescence`` extensions where they apply), evaluated with
+:mod:`brdffit.export.gltf_brdf`, on a unit sphere (:mod:`brdffit.export.gltf_mesh`) so
+that a viewer shows it.
 
 Roughness convention: glTF's ``roughnessFactor`` is perceptual, ``alpha = roughness^2``
 (as in Filament, Disney and MaterialX). A GGX ``alpha`` (walter) is written as
@@ -17,9 +18,23 @@ Exact mappings (measured by :func:`brdffit.export.export`):
   ``f0`` through ``ior`` and ``specularColorFactor`` (``min(R0(ior) specularColor, 1) =
   f0``), ``alpha <= 1``; anisotropic ``alpha_x``, ``alpha_y`` through ``alpha_b =
   min``, ``anisotropyStrength = sqrt((max - min)/(1 - min))``, rotation 0 or pi/2;
+  with ``thin_film`` and ``ks = 1`` (or no specular weight) the film as
+  ``KHR_materials_iridescence`` (``iridescenceFactor = film_weight``, ``iridescenceIor =
+  film_ior``, the thickness ``film_thickness``): walter mixes each lobe's Schlick Fresnel
+  with the film's on ``f0`` at ``V.H`` by ``film_weight``, as the extension's dielectric
+  with ``specularFactor`` 1 does (:mod:`brdffit.models.gltf_pbr`). With ``ks < 1`` it is
+  not exact (glTF's film is not scaled by ``specularFactor`` and sits on ``specularFactor
+  f0``) and is fitted;
 * ``gltf`` (:mod:`brdffit.models.gltf_pbr`), the material itself: every parameter is
-  written as it is (``specular_f0`` through ``ior`` and ``specularColorFactor``), the
-  extensions its options turn on; exact by construction.
+  written as it is (``specular_f0`` through ``ior`` and ``specularColorFactor``, the
+  film's thickness as ``iridescenceThicknessMaximum``, the thickness of a material
+  without a thickness texture; ``iridescenceThicknessMinimum`` only maps a texture's 0,
+  and the Khronos validator reports it written without one), the extensions its options
+  turn on; exact by construction,
+  but for one case: a fitted ``base_color`` or ``specular specular_f0`` channel within
+  1e-9 of 0 is written as 0 (:mod:`brdffit.export._numbers`), and a film on it reads
+  ``sqrt(f0)``, so the written material departs by ~1e-7 relative and the export says
+  approximate (seen on an RGL cc_nothern_aurora fit with ``base_color[r] = 8e-10``).
 
 Everything else is approximate, chiefly because glTF couples its diffuse to the
 specular (``(1 - max F) baseColor / pi``) where brdffit's models add an uncoupled
@@ -44,7 +59,9 @@ from brdffit.util.version import __version__
 Start = tuple[Family, dict[str, object]]
 
 
-def gltf_family(rotation: float | None, clearcoat: bool, sheen: bool) -> Family:
+def gltf_family(
+    rotation: float | None, clearcoat: bool, sheen: bool, iridescence: bool = False
+) -> Family:
     """The glTF material with the extensions chosen statically.
 
     ``rotation``: None (isotropic) or the anisotropy rotation (radians, 0 or pi/2).
@@ -62,6 +79,12 @@ def gltf_family(rotation: float | None, clearcoat: bool, sheen: bool) -> Family:
         slots += (Slot("clearcoat", 1, 0.0, 1.0), Slot("clearcoat_roughness", 1, 1e-3, 1.0))
     if sheen:
         slots += (Slot("sheen_color", 3, 0.0, 1.0), Slot("sheen_roughness", 1, 0.045, 1.0))
+    if iridescence:  # the bounds of the gltf model's (and walter's film's) parameters
+        slots += (
+            Slot("iridescence", 1, 0.0, 1.0),
+            Slot("iridescence_ior", 1, 1.0, 2.5),
+            Slot("iridescence_thickness", 1, 0.0, 1200.0),
+        )
 
     def values(p: Mapping[str, object]) -> dict[str, object]:
         return dict(p) | ({} if rotation is None else {"anisotropy_rotation": rotation})
@@ -127,6 +150,12 @@ def to_material(p: Mapping[str, object]) -> dict:
             "sheenColorFactor": _floats(p["sheen_color"]),
             "sheenRoughnessFactor": float(p["sheen_roughness"]),
         }
+    if "iridescence" in p:  # no texture: the thickness is the maximum (module docstring)
+        ext["KHR_materials_iridescence"] = {
+            "iridescenceFactor": float(p["iridescence"]),
+            "iridescenceIor": float(p["iridescence_ior"]),
+            "iridescenceThicknessMaximum": float(p["iridescence_thickness"]),
+        }
     out: dict = {"pbrMetallicRoughness": pbr}
     return out | ({"extensions": ext} if ext else {})
 
@@ -141,28 +170,43 @@ def _roughness(ax: float, ay: float) -> tuple[float | None, dict[str, float]]:
     return (0.0 if ax >= ay else np.pi / 2), out | {"anisotropy_strength": float(strength)}
 
 
-def _start(ax: float, ay: float, cc: bool = False, sheen: bool = False, **values: object) -> Start:
+def _start(
+    ax: float,
+    ay: float,
+    cc: bool = False,
+    sheen: bool = False,
+    film: bool = False,
+    **values: object,
+) -> Start:
     rotation, rough = _roughness(ax, ay)
     start = {"metallic": 0.0, "specular": 1.0, "specular_f0": np.full(3, 0.04)} | rough
-    return gltf_family(rotation, cc, sheen), start | values
+    return gltf_family(rotation, cc, sheen, film), start | values
 
 
 def _walter(model: AbstractModel, p: Mapping[str, np.ndarray]) -> list[Start]:
     """One start per specular lobe (glTF holds one), with the sheen as
-    ``KHR_materials_sheen`` and the clear coat as ``KHR_materials_clearcoat``: walter's
-    are those extensions' formulas (:mod:`brdffit.models.walter`)."""
+    ``KHR_materials_sheen``, the clear coat as ``KHR_materials_clearcoat`` and the thin
+    film as ``KHR_materials_iridescence``: walter's are those extensions' formulas
+    (:mod:`brdffit.models.walter`; the film's exactly when ``ks = 1``)."""
     layers: dict[str, object] = {"base_color": p.get("kd", np.zeros(3))}
     if model.sheen:
         layers |= {"sheen_color": p["sheen_color"], "sheen_roughness": p["sheen_roughness"]}
     if model.clearcoat:
         layers |= {"clearcoat": p["clearcoat"]}
         layers["clearcoat_roughness"] = float(np.sqrt(p["clearcoat_alpha"]))
+    if model.thin_film:
+        layers |= {
+            "iridescence": p["film_weight"],
+            "iridescence_ior": p["film_ior"],
+            "iridescence_thickness": p["film_thickness"],
+        }
     return [
         _start(
             ax,
             ay,
             model.clearcoat,
             model.sheen,
+            model.thin_film,
             **layers,
             specular=float(np.mean(ks)),
             specular_f0=f0,
@@ -219,7 +263,8 @@ def _course(model: AbstractModel, p: Mapping[str, np.ndarray]) -> list[Start]:
 def _gltf(model: AbstractModel, p: Mapping[str, np.ndarray]) -> list[Start]:
     """The identity: the model is this material (:mod:`brdffit.models.gltf_pbr`)."""
     core = {"specular": 1.0, "specular_f0": np.full(3, 0.04)}  # without KHR_materials_specular
-    return [(gltf_family(None, model.clearcoat, model.sheen), core | dict(p))]
+    family = gltf_family(None, model.clearcoat, model.sheen, model.iridescence)
+    return [(family, core | dict(p))]
 
 
 def _generic(model: AbstractModel, p: Mapping[str, np.ndarray]) -> list[Start]:
@@ -249,7 +294,8 @@ def candidates(model: AbstractModel, p: Mapping[str, np.ndarray]) -> list[Start]
 LOSSES = {
     "walter": "Lambert kd / pi becomes glTF's coupled (1 - max F) baseColor / pi; RGB ks "
     "becomes one specularFactor; Beckmann or uncorrelated masking become GGX with "
-    "height-correlated Smith",
+    "height-correlated Smith; a thin film under ks < 1 becomes glTF's film, which "
+    "specularFactor does not scale",
     "filament": "the diffuse becomes glTF's (1 - max F)-weighted Lambert; Filament's clear "
     "coat (Kelemen visibility, base f0 and roughness changes) and sheen base scaling differ",
     "disney": "Disney's retro-reflective diffuse, subsurface, grazing sheen and GTR1 clear "
@@ -288,4 +334,11 @@ def finish(result: FitResult, model: AbstractModel, m: Match) -> tuple[dict, dic
     ]
     if "KHR_materials_sheen" in used:
         notes.append("sheen: evaluated with the Ashikhmin visibility and no albedo scaling")
+    if "KHR_materials_iridescence" in used:
+        notes.append(
+            "iridescence: the film's Fresnel evaluated at V.H, as the extension's text mixes "
+            "it with the Fresnel at V.H; the glTF sample viewer and three.js evaluate it once "
+            "per pixel at N.V, which agrees at the mirror direction only (on RGL cc_* fits "
+            "that moves f cos by 1-2% RMS); the thickness is iridescenceThicknessMaximum"
+        )
     return doc, {".gltf": json.dumps(doc, indent=2) + "\n"}, notes
