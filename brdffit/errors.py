@@ -72,7 +72,7 @@ class MissingDependencyError(BrdffitError, ImportError):
 
 
 class ExportError(BrdffitError, ValueError):
-    """An export target is unknown, or has no clean mapping for the model; says which."""
+    """An export target is unknown, or the fit cannot be written to it; says which."""
 
 
 class ExportValueError(ExportError):

@@ -63,7 +63,10 @@ import functools
 from collections.abc import Mapping, Sequence
 
 import MaterialX as mx
+import mpmath as mp
 import numpy as np
+
+from tests.references import Pair, dot, num, per_pair, rgb
 
 NODEDEF = "ND_open_pbr_surface_surfaceshader"
 EPS = 1e-8  # M_FLOAT_EPS, libraries/stdlib/genglsl/lib/mx_math.glsl
@@ -737,3 +740,362 @@ def open_pbr_brdf(
         (N, 3) float64, zero where ``wi.z <= 0`` or ``wo.z <= 0``.
     """
     return evaluate(inputs, wi, wo)
+
+
+# ---------------------------------------------------------------------------------------------
+# The 40-digit reference of the ``openpbr`` model (tests/models/test_precision.py)
+#
+# The closures above, rewritten in mpmath one direction pair at a time (tests/references.py):
+# MaterialX's GLSL as the numpy transcriptions read it, every clamp to [eps, 1] of N.L, N.V,
+# V.H and L.V included, composed as the node graph composes them for the inputs the model
+# leaves free (its fixed inputs: base_weight 1, coat_color white, coat_darkening 1,
+# coat_roughness_anisotropy 0, no transmission, subsurface or emission, opacity 1). The
+# numpy interpreter above is float64 and reads the graph; this reads no library and no model.
+
+
+def _mp_clamp(x, lo=None, hi=None):
+    lo = num("1e-8") if lo is None else lo
+    hi = mp.mpf(1) if hi is None else hi
+    return min(max(x, lo), hi)
+
+
+def _mp_fit(x, y) -> tuple:
+    """``mx_ggx_dir_albedo_analytic``'s ``(A, B)``, each clamped to [0, 1]."""
+    terms = (1, x, y, x * y, x * x, y * y, x * x * y, x * y * y, x * x * y * y)
+    r = [sum(num(repr(float(_GGX_FIT[t, k]))) * terms[t] for t in range(9)) for k in range(4)]
+    zero, one = mp.mpf(0), mp.mpf(1)
+    return _mp_clamp(r[0] / r[2], zero, one), _mp_clamp(r[1] / r[3], zero, one)
+
+
+def _mp_comp(fss, ab):
+    """``mx_ggx_energy_compensation``: ``1 + F (1 - E_ss) / E_ss`` of each Fresnel."""
+    ess = ab[0] + ab[1]
+    return [1 + f * (1 - ess) / ess for f in fss]
+
+
+def _mp_alphas(r, aniso) -> tuple:
+    """``open_pbr_anisotropy`` then the closure's clamp of each alpha to [eps, 1]."""
+    ax = r * r * mp.sqrt(2 / (1 + (1 - aniso) ** 2))
+    return _mp_clamp(ax), _mp_clamp((1 - aniso) * ax)
+
+
+def _mp_microfacet(g: Pair, ax, ay, nl, nv):
+    """``D G2 / (4 N.L N.V)``: ``mx_ggx_NDF`` of H in the frame (T = x, N = z) and
+    ``mx_ggx_smith_G2`` of the mean alpha, at the clamped cosines."""
+    hx, hy = g.h[0] / ax, g.h[1] / ay
+    d = 1 / (mp.pi * ax * ay * (hx * hx + hy * hy + g.h[2] ** 2) ** 2)
+    a2 = ax * ay
+    lam_l = mp.sqrt(a2 + (1 - a2) * nl**2)
+    lam_v = mp.sqrt(a2 + (1 - a2) * nv**2)
+    g2 = 2 * nl * nv / (lam_l * nv + lam_v * nl)
+    return d * g2 / (4 * nl * nv)
+
+
+def _mp_fresnel_dielectric(c, ior):
+    """``mx_fresnel_dielectric`` (1 on total internal reflection)."""
+    g2 = ior * ior + c * c - 1
+    if g2 < 0:
+        return mp.mpf(1)
+    g = mp.sqrt(g2)
+    return (g - c) ** 2 / (2 * (g + c) ** 2) * (1 + ((g + c) * c - 1) ** 2 / ((g - c) * c + 1) ** 2)
+
+
+def _mp_hoffman(c, f0: list, f82: list) -> list:
+    """``mx_fresnel_hoffman_schlick`` with ``F90 = 1``, exponent 5 (colours floored at 0)."""
+    cmax = mp.mpf(1) / 7
+    factor = 1 / (cmax * (1 - cmax) ** 6)
+    x = _mp_clamp(c, mp.mpf(0), mp.mpf(1))
+    out = []
+    for a0, a82 in zip(f0, f82, strict=True):
+        a0, a82 = max(a0, 0), max(a82, 0)
+        a = (a0 + (1 - a0) * (1 - cmax) ** 5) * (1 - a82) * factor
+        out.append(a0 + (1 - a0) * (1 - x) ** 5 - a * x * (1 - x) ** 6)
+    return out
+
+
+def _mp_f0_to_ior(f0):
+    s = mp.sqrt(_mp_clamp(f0, num("0.01"), num("0.99")))
+    return (1 + s) / (1 - s)
+
+
+def _mp_polarized(c, n) -> tuple:
+    """``mx_fresnel_conductor_polarized`` with ``k = 0`` (and the dielectric one, the same
+    for ``n >= 1``): ``(R_p, R_s)``."""
+    cos2 = _mp_clamp(c, mp.mpf(0), mp.mpf(1)) ** 2
+    sin2 = 1 - cos2
+    t0 = n * n - sin2
+    a2pb2 = abs(t0)
+    t1 = a2pb2 + cos2
+    a = mp.sqrt(max((a2pb2 + t0) / 2, 0))
+    t2 = 2 * a * c
+    rs = (t1 - t2) / (t1 + t2)
+    t3 = cos2 * a2pb2 + sin2 * sin2
+    t4 = t2 * sin2
+    return rs * (t3 - t4) / (t3 + t4), rs
+
+
+def _mp_phase(c, eta1, eta2) -> tuple:
+    """``mx_fresnel_conductor_phase_polarized`` with ``kappa = 0``: ``(phi_p, phi_s)``."""
+    sin2 = 1 - c * c
+    big_a = eta2 * eta2 - eta1 * eta1 * sin2
+    big_b = abs(big_a)
+    u = mp.sqrt((big_a + big_b) / 2)
+    v = mp.sqrt((big_b - big_a) / 2)
+    phi_s = mp.atan2(2 * eta1 * v * c, u * u + v * v - (eta1 * c) ** 2)
+    phi_p = mp.atan2(
+        2 * eta1 * eta2 * eta2 * c * (0 - v), (eta2 * eta2 * c) ** 2 - eta1 * eta1 * (u * u + v * v)
+    )
+    return phi_p, phi_s
+
+
+_MP_XYZ_TO_RGB = (
+    ("2.3706743", "-0.9000405", "-0.4706338"),
+    ("-0.5138850", "1.4253036", "0.0885814"),
+    ("0.0052982", "-0.0146949", "1.0093968"),
+)
+
+
+def _mp_sensitivity(opd, shift: list) -> list:
+    """``mx_eval_sensitivity(opd, shift)``: XYZ (three shifts, one per component)."""
+    phase = 2 * mp.pi * opd
+    val, pos = ("5.4856e-13", "4.4201e-13", "5.2481e-13"), ("1.6810e06", "1.7953e06", "2.2084e06")
+    var = ("4.3278e09", "9.3046e09", "6.6121e09")
+    xyz = [
+        num(v)
+        * mp.sqrt(2 * mp.pi * num(s))
+        * mp.cos(num(q) * phase + sh)
+        * mp.exp(-num(s) * phase**2)
+        for v, q, s, sh in zip(val, pos, var, shift, strict=True)
+    ]
+    var_x = num("4.5282e09")
+    xyz[0] += (
+        num("9.7470e-14")
+        * mp.sqrt(2 * mp.pi * var_x)
+        * mp.cos(num("2.2399e06") * phase + shift[0])
+        * mp.exp(-var_x * phase**2)
+    )
+    return [x / num("1.0685e-7") for x in xyz]
+
+
+def _mp_airy(c, tf_ior, thickness_nm, *, ior=None, f0=None, f82=None) -> list:
+    """``mx_fresnel_airy`` (``AIRY_FRESNEL_ITERATIONS`` 2), air outside: a dielectric base of
+    index ``ior`` or a Schlick base (``f0``, ``f82``, F90 1), RGB clamped to [0, 1]."""
+    eta1 = mp.mpf(1)
+    eta2 = max(tf_ior, eta1)
+    schlick = f0 is not None
+    cos_t = mp.sqrt(1 - (1 - c * c) * (eta1 / eta2) ** 2)
+    r12p, r12s = _mp_polarized(c, eta2 / eta1)
+    if cos_t <= 0:
+        r12p = r12s = mp.mpf(1)
+    t121p, t121s = 1 - r12p, 1 - r12s
+    if schlick:
+        eta3 = [_mp_f0_to_ior(x) for x in f0]
+        r23p = r23s = [x / 2 for x in _mp_hoffman(cos_t, f0, f82)]
+        phi23p = phi23s = [mp.pi if e3 < eta2 else mp.mpf(0) for e3 in eta3]
+    else:
+        pol = _mp_polarized(cos_t, ior / eta2)
+        r23p, r23s = [pol[0]] * 3, [pol[1]] * 3
+        ph = _mp_phase(cos_t, eta2, ior)
+        phi23p, phi23s = [ph[0]] * 3, [ph[1]] * 3
+    cos_b = mp.cos(mp.atan(eta2 / eta1))
+    phi21p, phi21s = (mp.mpf(0) if c < cos_b else mp.pi), mp.pi
+    opd = 2 * eta2 * cos_t * thickness_nm * num("1e-9")
+    total = [mp.mpf(0)] * 3
+    for r12, t121, r23, phi23, phi21 in (
+        (r12p, t121p, r23p, phi23p, phi21p),
+        (r12s, t121s, r23s, phi23s, phi21s),
+    ):
+        r123 = [mp.sqrt(max(r12 * x, 0)) for x in r23]
+        rr = [t121**2 * x / (1 - r12 * x) for x in r23]
+        total = [t + r12 + x for t, x in zip(total, rr, strict=True)]
+        cm = [x - t121 for x in rr]
+        phi = [x + phi21 for x in phi23]
+        for m in (1, 2):
+            cm = [a * b for a, b in zip(cm, r123, strict=True)]
+            sens = _mp_sensitivity(m * opd, [m * x for x in phi])
+            total = [t + a * 2 * s for t, a, s in zip(total, cm, sens, strict=True)]
+    out = []
+    for row in _MP_XYZ_TO_RGB:
+        v = sum(num(m) * t / 2 for m, t in zip(row, total, strict=True))
+        out.append(_mp_clamp(v, mp.mpf(0), mp.mpf(1)))
+    return out
+
+
+def _mp_fujii() -> tuple:
+    """Fujii's constants ``(1/2 - 2/(3 pi), 2/3 - 28/(15 pi))`` at the working precision."""
+    return mp.mpf(1) / 2 - 2 / (3 * mp.pi), mp.mpf(2) / 3 - 28 / (15 * mp.pi)
+
+
+def _mp_fujii_albedo(c, r):
+    """``mx_oren_nayar_fujii_diffuse_dir_albedo``, as printed (``1 - si^3`` and ``si / c``)."""
+    c1, _ = _mp_fujii()
+    a = 1 / (1 + c1 * r)
+    si = mp.sqrt(max(0, 1 - c * c))
+    gg = (
+        si * (mp.acos(_mp_clamp(c, mp.mpf(-1), mp.mpf(1))) - si * c)
+        + 2 * ((si / c) * (1 - si**3) - si) / 3
+    )
+    return a + r * a * gg / mp.pi
+
+
+def _mp_eon(nl, nv, lv, r, color: list) -> list:
+    """``mx_oren_nayar_compensated_diffuse`` (EON) times 1/pi: the BRDF of the diffuse."""
+    eps = num("1e-8")
+    c1, c2 = _mp_fujii()
+    s = lv - nl * nv
+    stinv = s / max(nl, nv) if s > 0 else s
+    a = 1 / (1 + c1 * r)
+    ev, el = _mp_fujii_albedo(nv, r), _mp_fujii_albedo(nl, r)
+    avg = a * (1 + c2 * r)
+    out = []
+    for k in color:
+        single = k * a * (1 + r * stinv)
+        ms = k * k * avg / (1 - k * max(0, 1 - avg))
+        multi = ms * max(eps, 1 - ev) * max(eps, 1 - el)
+        out.append((single + multi / max(eps, 1 - avg)) / mp.pi)
+    return out
+
+
+def _mp_zeltner_albedo(x, y):
+    """``mx_zeltner_sheen_dir_albedo``."""
+    s = y * (num("0.0206607") + num("1.58491") * y) / (num("0.0379424") + y * (num("1.32227") + y))
+    m = (
+        y
+        * (num("-0.193854") + y * (num("-1.14885") + y * (num("1.7932") - num("0.95943") * y * y)))
+        / (num("0.046391") + y)
+    )
+    o = (
+        y
+        * (num("0.000654023") + (num("-0.0207818") + num("0.119681") * y) * y)
+        / (num("1.26264") + y * (num("-1.92021") + y))
+    )
+    return mp.exp(-(((x - m) / s) ** 2) / 2) / (s * mp.sqrt(2 * mp.pi)) + o
+
+
+def _mp_zeltner_ltc(g: Pair, nv, r):
+    """``mx_zeltner_sheen_brdf``: the LTC lobe times the cosine (unclamped N.L), N = z."""
+    x_vec = [g.wo[0], g.wo[1], g.wo[2] - nv]
+    len_sqr = dot(x_vec, x_vec)
+    if len_sqr > 0:
+        n = mp.sqrt(len_sqr)
+        x_vec = [v / n for v in x_vec]
+        y_vec = [-x_vec[1], x_vec[0], mp.mpf(0)]  # cross((0, 0, 1), X)
+    else:  # mx_orthonormal_basis((0, 0, 1))
+        x_vec = [mp.mpf(1), mp.mpf(0), mp.mpf(0)]
+        y_vec = [mp.mpf(0), mp.mpf(1), mp.mpf(0)]
+    w = (dot(g.wi, x_vec), dot(g.wi, y_vec), g.wi[2])
+    x, y = nv, r
+    a_inv = (
+        (num("2.58126") * x + num("0.813703") * y)
+        * y
+        / (1 + num("0.310327") * x * x + num("2.60994") * x * y)
+    )
+    b_inv = (
+        mp.sqrt(1 - x)
+        * (y - 1)
+        * y**3
+        / (
+            num("0.0000254053")
+            + num("1.71228") * x
+            - num("1.71506") * x * y
+            + num("1.34174") * y * y
+        )
+    )
+    wo = (a_inv * w[0] + b_inv * w[2], a_inv * w[1], w[2])
+    len_sqr = dot(wo, wo)
+    return max(wo[2], 0) / mp.pi * (a_inv / len_sqr) ** 2
+
+
+def _openpbr(model, p, g: Pair) -> list:
+    """OpenPBR Surface (opaque) as MaterialX 1.39.5's GLSL evaluates ``open_pbr_surface``,
+    with the model's options (``anisotropic``, ``coat``, ``fuzz``, ``thin_film``,
+    ``negative_f82``) and fixed inputs, in 1/sr:
+
+    ``f = fuzz + (1 - fuzz_weight E_z)(coat + T_coat k_dark B)``, ``B = m metal + (1 - m)
+    (spec tint + max(0, T_d) diffuse)`` (``mx_layer_bsdf``, the premultiplied ``mx_add_bsdf``
+    of the metal/dielectric mix and of the thin-film mix, whose throughput is ``max(0, t1 + t2
+    - 1)``, ``mx_multiply_bsdf_color3``'s clamp of the darkening to [0, 1])."""
+    eps, one, zero = num("1e-8"), mp.mpf(1), mp.mpf(0)
+    nl, nv, vh = _mp_clamp(g.ci), _mp_clamp(g.co), _mp_clamp(g.cd)
+    lv = _mp_clamp(dot(g.wi, g.wo))
+    color, m, sw = rgb(p["base_color"]), p["base_metalness"], p["specular_weight"]
+    tint, r, ior = rgb(p["specular_color"]), p["specular_roughness"], p["specular_ior"]
+    coat = model.coat
+    if coat:
+        cw, cior, cr = p["coat_weight"], p["coat_ior"], p["coat_roughness"]
+        r = r + (min(one, 2 * cr**4 + r**4) ** (one / 4) - r) * cw  # mix(r, coated, cw)
+        ratio = ior / cior if ior / cior > 1 else cior / ior
+        ior = ior * (1 - cw) + ratio * cw
+    # the specular_weight modulation of the graph: sign(eta - 1) sqrt(clamp(w F0(eta), 0, .99999))
+    f0 = ((ior - 1) / (ior + 1)) ** 2
+    e = mp.sign(ior - 1) * mp.sqrt(_mp_clamp(sw * f0, zero, num("0.99999")))
+    eta = (1 + e) / (1 - e)
+    aniso = p["specular_roughness_anisotropy"] if model.anisotropic else zero
+    ax, ay = _mp_alphas(r, aniso)
+    dg = _mp_microfacet(g, ax, ay, nl, nv)
+    ab = _mp_fit(nv, mp.sqrt(ax * ay))
+
+    def dielectric(fss: list, weight) -> tuple:  # mx_dielectric_bsdf: (BRDF, throughput)
+        if weight < eps:
+            return [zero] * 3, [one] * 3
+        comp = _mp_comp(fss, ab)
+        spec = [weight * dg * f * c * t for f, c, t in zip(fss, comp, tint, strict=True)]
+        albedo = ((eta - 1) / (eta + 1)) ** 2 * ab[0] + ab[1]
+        return spec, [1 - weight * albedo * c for c in comp]
+
+    def metal(fss: list, weight) -> list:  # mx_generalized_schlick_bsdf, F90 1
+        if weight < eps:
+            return [zero] * 3
+        comp = _mp_comp(fss, ab)
+        return [weight * dg * f * c for f, c in zip(fss, comp, strict=True)]
+
+    f_d = [_mp_fresnel_dielectric(vh, eta)] * 3
+    f_m = _mp_hoffman(vh, color, tint)
+    f_m = f_m if model.negative_f82 else [max(x, zero) for x in f_m]
+    if model.thin_film:
+        w, nm, film = p["thin_film_weight"], 1000 * p["thin_film_thickness"], p["thin_film_ior"]
+        spec, tp = dielectric(f_d, 1 - w)
+        spec_t, tp_t = dielectric(_mp_airy(vh, film, nm, ior=eta), w)
+        spec = [a + b for a, b in zip(spec, spec_t, strict=True)]
+        tp = [max(zero, a + b - 1) for a, b in zip(tp, tp_t, strict=True)]  # mx_add_bsdf
+        f_mt = _mp_airy(vh, film, nm, f0=color, f82=tint)
+        shine = [a + b for a, b in zip(metal(f_m, sw * (1 - w)), metal(f_mt, sw * w), strict=True)]
+    else:
+        spec, tp = dielectric(f_d, one)
+        tp = [max(zero, t) for t in tp]  # mx_add_bsdf with the thin film's empty half
+        shine = metal(f_m, sw)
+    diffuse = _mp_eon(nl, nv, lv, p["base_diffuse_roughness"], color)
+    base = [s + d * t for s, d, t in zip(spec, diffuse, tp, strict=True)]
+    out = [m * a + (1 - m) * b for a, b in zip(shine, base, strict=True)]
+    if coat:  # the darkening multiplies the base whatever the coat's weight
+        f0c = ((cior - 1) / (cior + 1)) ** 2
+        k = 1 - (1 - f0c) / cior**2
+        e_base = [c * (1 - m) + sw * c * m for c in color]  # mix(c, sw c, m)
+        dark = [_mp_clamp(1 + cw * ((1 - k) / (1 - eb * k) - 1), zero, one) for eb in e_base]
+        out = [o * d for o, d in zip(out, dark, strict=True)]
+        if cw >= eps:
+            axc, ayc = _mp_alphas(cr, zero)
+            abc = _mp_fit(nv, mp.sqrt(axc * ayc))
+            fc = _mp_fresnel_dielectric(vh, cior)
+            compc = _mp_comp([fc], abc)[0]
+            lobe = cw * fc * compc * _mp_microfacet(g, axc, ayc, nl, nv)
+            tpc = 1 - cw * (f0c * abc[0] + abc[1]) * compc
+            out = [lobe + o * tpc for o in out]
+    if model.fuzz and p["fuzz_weight"] >= eps:
+        fw, fr = p["fuzz_weight"], _mp_clamp(p["fuzz_roughness"], num("0.01"), one)
+        e_z = _mp_zeltner_albedo(nv, fr)
+        lobe = fw * e_z * _mp_zeltner_ltc(g, nv, fr) / nl
+        out = [
+            lobe * fc + o * (1 - fw * e_z) for fc, o in zip(rgb(p["fuzz_color"]), out, strict=True)
+        ]
+    return out
+
+
+@per_pair
+def openpbr_ref(model, p, g):
+    """MaterialX 1.39.5's ``open_pbr_surface`` (GLSL, reflection, one light) at the working
+    precision: the closures of this module rewritten in mpmath (:func:`_openpbr`)."""
+    return _openpbr(model, p, g)
+
+
+REFERENCES = {"openpbr": openpbr_ref}

@@ -243,6 +243,21 @@ ROLES: dict[str, Roles] = {
         "exponent",
         "kd",
     ),
+    "openpbr": Roles(  # MaterialX's OpenPBR, default options (tests/cases_j.py's core row)
+        {
+            "base_color": [0.8, 0.5, 0.2],
+            "base_metalness": 0.3,
+            "base_diffuse_roughness": 0.6,
+            "specular_weight": 0.7,
+            "specular_color": [0.9, 0.7, 0.8],
+            "specular_roughness": 0.35,
+            "specular_ior": 1.7,
+        },
+        "specular_roughness",
+        "squared",
+        "base_color",
+        floor_zero=("base_metalness",),
+    ),
     "oren_nayar": Roles({"rho": [0.3, 0.5, 0.8], "sigma": 0.4}, "sigma", "sigma", "rho"),
     "phong": Roles(
         {"kd": [0.2, 0.3, 0.4], "ks": [0.3, 0.2, 0.1], "n": 80.0}, "n", "exponent", "kd"

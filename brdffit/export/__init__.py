@@ -21,10 +21,11 @@ Targets (each module documents its mapping, roughness convention and losses):
 * ``"mitsuba"`` -- a BSDF dict for ``mi.load_dict`` and the same BSDF as XML
   (:mod:`brdffit.export.mitsuba`);
 * ``"gltf"`` -- a glTF 2.0 document holding one material, ``pbrMetallicRoughness`` with
-  ``KHR_materials_specular``, ``_ior``, ``_anisotropy``, ``_clearcoat``, ``_sheen`` where
-  they apply (:mod:`brdffit.export.gltf`);
-* ``"materialx"`` -- a MaterialX document with an ``open_pbr_surface``, only for the
-  models whose mapping is clean (:mod:`brdffit.export.materialx`).
+  ``KHR_materials_specular``, ``_ior``, ``_anisotropy``, ``_clearcoat``, ``_sheen``,
+  ``_iridescence`` where they apply (:mod:`brdffit.export.gltf`);
+* ``"materialx"`` -- a MaterialX document with an ``open_pbr_surface``, the fit itself
+  for ``openpbr``, an OpenPBR surface fitted to the model otherwise
+  (:mod:`brdffit.export.materialx`).
 
 Which fit to export (fitted under ``ngan``, else the note of :func:`render_note`), and
 the functions themselves: :mod:`brdffit.export.api`.

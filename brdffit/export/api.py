@@ -124,19 +124,12 @@ def parse_targets(text: str | Iterable[str]) -> tuple[str, ...]:
 
 
 def check_targets(model: object, targets: str | Iterable[str]) -> tuple[str, ...]:
-    """The checked target names; :class:`ExportError` when one cannot take ``model``.
-
-    ``model`` is a built model (:func:`brdffit.models.get`, grey variants included), so
-    the command line can refuse before it fits. Returns :func:`parse_targets` of
-    ``targets``.
-    """
-    names = parse_targets(targets)
-    base = base_of(model)
-    for t in names:
-        reason = getattr(TARGETS[t], "unsupported", lambda m: None)(base)
-        if reason:
-            raise ExportError(f"export {t}: {reason}")
-    return names
+    """The checked target names (:func:`parse_targets`), so that the command line refuses
+    a bad ``--export`` before it fits. Every target takes every model (``model``, a built
+    model, is accepted for that reason and not read): a form without an exact mapping is
+    fitted and its error measured."""
+    del model
+    return parse_targets(targets)
 
 
 def default_prefix(input_path: str | Path, json_path: str | Path | None, label: str) -> Path:
@@ -234,9 +227,6 @@ def _choose(module: types.ModuleType, prep: _Prepared, fit: bool) -> tuple[Match
 def _export(prep: _Prepared, name: str, fit: bool = True) -> Export:
     """:func:`export` of a prepared fit to the checked target ``name``."""
     module = TARGETS[name]
-    reason = getattr(module, "unsupported", lambda m: None)(prep.base)
-    if reason:
-        raise ExportError(f"export {name}: {reason}")
     chosen, tried = _choose(module, prep, fit)
     chosen = _numbers.writable(chosen, prep.f_model, prep.wi, prep.wo, prep.albedo)
     material, files, notes = module.finish(prep.result, prep.base, chosen)
@@ -273,8 +263,8 @@ def export(result: FitResult, target: str, *, fit: bool = True) -> Export:
     closed-form mappings without least squares (fast; exact mappings are unchanged,
     approximate ones have larger errors).
 
-    Raises :class:`ExportError` for an unknown target or a model the target has no clean
-    mapping for (MaterialX); :class:`~brdffit.errors.ExportValueError` (a subclass)
+    Raises :class:`ExportError` for an unknown target;
+    :class:`~brdffit.errors.ExportValueError` (a subclass)
     naming a parameter or value that is not finite.
     """
     (name,) = parse_targets(target)

@@ -75,6 +75,8 @@ FORMS: dict[str, tuple[str, ...]] = {
         "gltf[sheen=true]",
         "gltf[clearcoat=true]",
         "gltf[sheen=true,clearcoat=true]",
+        "gltf[iridescence=true]",
+        "gltf[clearcoat=true,iridescence=true]",
     ),
     "mitsuba": (
         "principled",
@@ -85,16 +87,20 @@ FORMS: dict[str, tuple[str, ...]] = {
         "walter[n_lobes=2,grey=ks_1+ks_2]",
     ),
     "materialx": (
-        "lambert",
-        "walter[masking=height_correlated,diffuse=false,grey=ks]",
+        "openpbr",
+        "openpbr[fuzz=true]",
+        "openpbr[coat=true]",
+        "openpbr[coat=true,fuzz=true]",
     ),
 }
 """Forms fitted per target, each exported exactly (or, for a blend whose weights leave
 their range, with its measured error): glTF's metallic-roughness material and its
-sheen and clear-coat extensions (:mod:`brdffit.models.gltf_pbr`); Mitsuba's
+sheen, clear-coat and iridescence (thin-film) extensions, the film alone and under a
+clear coat, as colour-shift paints and wraps are (:mod:`brdffit.models.gltf_pbr`); Mitsuba's
 ``principled`` (:mod:`brdffit.models.mitsuba_principled`) and walter's GGX lobes, which
 Mitsuba holds as ``blendbsdf`` of ``diffuse`` and ``principled`` metals; MaterialX's
-OpenPBR where this package's mapping is exact (a Lambertian base, a metal)."""
+OpenPBR Surface as its GLSL evaluates it, with its fuzz and coat
+(:mod:`brdffit.models.openpbr`)."""
 
 REFERENCE = "walter[n_lobes=2,sheen=true]"
 """The richer form fitted beside a target's forms (module docstring)."""

@@ -166,26 +166,24 @@ def beckmann_lambda_rational(v: jax.Array, alpha_x: jax.Array, alpha_y: jax.Arra
     return jnp.where(a < 1.6, lam, 0.0)
 
 
-CHARLIE_FLOOR = 1e-30
-"""Floor of ``sin^2 theta_h`` in :func:`charlie_d` for the glTF sheen (walter's and the glTF
-model's): keeps ``0 log 0`` out of the derivative at ``theta_h = 0``, where ``D`` is 0;
-the value it adds there, ``(1e-30)^(1/(2a))`` times the normalisation, is below 1e-12
-1/sr for every ``a <= 1``. (Filament's own floor, 2^-7, changes the lobe.)"""
-
-
-def charlie_d(h: jax.Array, a: jax.Array, floor: float) -> jax.Array:
+def charlie_d(h: jax.Array, a: jax.Array, floor: float = 0.0) -> jax.Array:
     """Charlie sheen NDF (Estevez and Kulla 2017, "Production Friendly Microfacet Sheen
     BRDF", eq. 2), 1/sr, (N,): ``(2 + 1/a) (sin^2 theta_h)^(1/(2a)) / (2 pi)``.
 
     ``a`` is the sheen alpha (``sheen_roughness^2`` in Filament and glTF's
-    ``KHR_materials_sheen``). ``sin^2 theta_h`` is floored at ``floor`` > 0 before the
-    power, which keeps the derivative of ``sin^(1/a)`` finite at ``theta_h = 0``
-    (``0 * log 0``); each caller gives its floor and its reason. It integrates to 1
-    against ``cos theta_h`` over the hemisphere for every ``a`` (the paper's
-    normalisation; ``tests/models/test_lobes.py`` checks it by quadrature).
+    ``KHR_materials_sheen``). ``sin^2 theta_h`` is floored at ``floor`` before the power
+    (Filament's 2^-7 changes the lobe; glTF's sheen has none, 0). At ``sin^2 theta_h = 0``
+    ``D`` is exactly 0 and the power is taken of 1 instead (a ``where`` on both sides), so
+    no ``0 * log 0`` enters the derivative; a floor of 1e-30 used before added up to
+    6e-7 1/sr to the lobe at a grazing mirror pair (through Neubelt's ``V``), 2e-8
+    relative, which the 40-digit reference caught. It integrates to 1 against ``cos
+    theta_h`` over the hemisphere for every ``a`` (the paper's normalisation;
+    ``tests/models/test_lobes.py`` checks it by quadrature).
     """
     sin2 = jnp.maximum(h[:, 0] ** 2 + h[:, 1] ** 2, floor)
-    return (2.0 + 1.0 / a) * jnp.exp(0.5 / a * jnp.log(sin2)) * (0.5 * INV_PI)
+    positive = sin2 > 0.0
+    power = jnp.exp(0.5 / a * jnp.log(jnp.where(positive, sin2, 1.0)))
+    return jnp.where(positive, (2.0 + 1.0 / a) * power * (0.5 * INV_PI), 0.0)
 
 
 XYZ_TO_REC709 = (
@@ -209,6 +207,13 @@ def _sensitivity(opd: jax.Array, shift: jax.Array) -> jax.Array:
     terms by ``C_m = (R_s - T_121) sqrt(R_12 R_23)^m``, small unless both interfaces
     reflect strongly, so its error is smaller.
     """
+    return sensitivity_xyz(opd, shift) @ jnp.asarray(XYZ_TO_REC709, opd.dtype).T
+
+
+def sensitivity_xyz(opd: jax.Array, shift: jax.Array) -> jax.Array:
+    """The CIE XYZ terms of :func:`_sensitivity`, before any conversion to RGB (N, 3): Belcour
+    and Barla's Gaussian fits over ``integral of y-bar`` (1.0685e-7); ``opd`` in nm (N, 1),
+    ``shift`` (N, 3). MaterialX's ``mx_eval_sensitivity`` (``opd`` in metres there)."""
     phase = 2.0 * jnp.pi * opd * 1e-9  # (N, 1)
     val = jnp.array([[5.4856e-13, 4.4201e-13, 5.2481e-13]], opd.dtype)
     pos = jnp.array([[1.6810e06, 1.7953e06, 2.2084e06]], opd.dtype)
@@ -219,8 +224,7 @@ def _sensitivity(opd: jax.Array, shift: jax.Array) -> jax.Array:
         9.7470e-14 * jnp.sqrt(2.0 * jnp.pi * 4.5282e09) * jnp.cos(2.2399e06 * phase + shift[:, :1])
     )
     extra = extra * jnp.exp(-4.5282e09 * phase**2)
-    xyz = (xyz + jnp.concatenate([extra, jnp.zeros_like(xyz[:, 1:])], axis=1)) / 1.0685e-7
-    return xyz @ jnp.asarray(XYZ_TO_REC709, xyz.dtype).T
+    return (xyz + jnp.concatenate([extra, jnp.zeros_like(xyz[:, 1:])], axis=1)) / 1.0685e-7
 
 
 def thin_film_fresnel(
@@ -236,9 +240,10 @@ def thin_film_fresnel(
     f0)`` (an approximation for metals, as the extension says). Schlick reflectances at
     both interfaces (``R12`` at ``theta_1``, ``R23`` at the refracted ``theta_2``), phase
     shifts 0 or pi by the order of the indices, optical path difference ``OPD = 2
-    film_ior thickness cos(theta_2)`` (Belcour's code and the glTF sample viewer; the
-    extension's text writes ``cos(theta_1)``), the Airy sum's terms ``m = 0, 1, 2``
-    integrated over the spectrum analytically (:func:`_sensitivity`), negatives clamped to 0.
+    film_ior thickness cos(theta_2)`` (Belcour's code, the glTF sample viewer and the
+    extension's text since 2024; earlier revisions wrote ``cos(theta_1)``), the Airy
+    sum's terms ``m = 0, 1, 2`` integrated over the spectrum analytically
+    (:func:`_sensitivity`), negatives clamped to 0.
     As the reference: the film's index goes to 1 as its thickness goes to 0 (smoothstep
     over 0.03 nm), ``f0`` is clamped to 0.9999 and ``R12 R23`` to [1e-5, 0.9999]; ``f0``
     is floored at 1e-12 (``sqrt f0`` at 1e-6) so that the derivative of ``sqrt f0`` stays
@@ -350,3 +355,116 @@ def log_cos_theta_h(h: jax.Array) -> jax.Array:
         0.5 * jnp.log1p(-jnp.where(near, s2, 0.0)),
         jnp.log(jnp.maximum(h[:, 2], 1e-30)),
     )
+
+
+FUJII_C1 = 0.5 - 2.0 / (3.0 * jnp.pi)
+"""Fujii's constant of the FON ``A = 1 / (1 + C1 sigma)`` (``1/2 - 2/(3 pi)``)."""
+FUJII_C2 = 2.0 / 3.0 - 28.0 / (15.0 * jnp.pi)
+"""Constant of the FON average albedo ``A (1 + C2 sigma)`` (``2/3 - 28/(15 pi)``)."""
+
+
+def fujii_albedo(cos: jax.Array, sigma: jax.Array) -> jax.Array:
+    """Directional albedo of Fujii's Oren-Nayar (FON), exact (Portsmouth, Kutz, Hill 2025,
+    "EON: A practical energy-preserving rough diffuse BRDF", JCGT 14(1), eq. 11), (N,):
+    ``A + B G(cos) / pi``, ``A = 1 / (1 + C1 sigma)``, ``B = sigma A``, ``G = S (acos(c) -
+    S c) + 2 ((S / c)(1 - S^3) - S) / 3``, ``S = sin = sqrt(1 - c^2)``.
+
+    ``(S / c)(1 - S^3)`` is written ``S c (1 + S + S^2) / (1 + S)`` (``1 - S = c^2 /
+    (1 + S)``): equal, without the cancellation of ``1 - S^3`` near grazing or the
+    division by ``c``. ``cos`` in (0, 1].
+    """
+    a = 1.0 / (1.0 + FUJII_C1 * sigma)
+    s = jnp.sqrt(jnp.maximum(1.0 - cos**2, 0.0))
+    g = s * (jnp.arccos(jnp.clip(cos, -1.0, 1.0)) - s * cos)
+    g = g + 2.0 * (s * cos * (1.0 + s + s * s) / (1.0 + s) - s) / 3.0
+    return a + sigma * a * g * INV_PI
+
+
+def eon_diffuse(
+    cos_i: jax.Array,
+    cos_o: jax.Array,
+    cos_io: jax.Array,
+    sigma: jax.Array,
+    color: jax.Array,
+    floor: float,
+) -> jax.Array:
+    """Energy-preserving Oren-Nayar (EON, Portsmouth et al. 2025, the diffuse of OpenPBR
+    Surface), BRDF times pi (unitless), (N, 3): ``f pi = rho A (1 + sigma s/t) + f_ms``.
+
+    ``s = cos_io - cos_i cos_o`` (``cos_io = wi.wo``), ``s/t = s / max(cos_i, cos_o)``
+    where ``s > 0`` else ``s`` (FON, Fujii 2013); ``A = 1 / (1 + C1 sigma)``; the
+    multiple-scattering lobe ``f_ms = rho_ms (1 - E(cos_i)) (1 - E(cos_o)) / (1 -
+    E_avg)``, ``rho_ms = rho^2 E_avg / (1 - rho (1 - E_avg))``, ``E`` of
+    :func:`fujii_albedo`, ``E_avg = A (1 + C2 sigma)``. Each ``1 - E`` is floored at
+    ``floor`` (MaterialX's ``M_FLOAT_EPS``, 1e-8), which keeps ``0 / 0`` out at ``sigma =
+    0``, where the lobe is Lambert's. ``sigma`` the roughness in [0, 1]; ``color`` (3,).
+    """
+    s = cos_io - cos_i * cos_o
+    s_over_t = jnp.where(s > 0.0, s / jnp.maximum(cos_i, cos_o), s)
+    a = 1.0 / (1.0 + FUJII_C1 * sigma)
+    single = (a * (1.0 + sigma * s_over_t))[:, None] * color[None, :]
+    e_avg = a * (1.0 + FUJII_C2 * sigma)
+    rho_ms = color**2 * e_avg / (1.0 - color * jnp.maximum(0.0, 1.0 - e_avg))
+    shape = (
+        jnp.maximum(floor, 1.0 - fujii_albedo(cos_i, sigma))
+        * jnp.maximum(floor, 1.0 - fujii_albedo(cos_o, sigma))
+        / jnp.maximum(floor, 1.0 - e_avg)
+    )
+    return single + shape[:, None] * rho_ms[None, :]
+
+
+F82_COS = 1.0 / 7.0
+"""``mu-bar``, the cosine (about 82 degrees) at which the F82 tint is specified."""
+
+
+def f82_schlick(f0: jax.Array, tint: jax.Array, cos: jax.Array) -> jax.Array:
+    """Schlick's Fresnel with Hoffman's F82 tint (Hoffman 2019, "Generalization of Adobe's
+    Fresnel Model"; the metal Fresnel of OpenPBR Surface and of MaterialX's
+    ``generalized_schlick_bsdf`` with ``F90 = 1``, exponent 5), (N, 3):
+    ``F = F_s(c) - c (1 - c)^6 a``, ``F_s(c) = f0 + (1 - f0)(1 - c)^5``, ``a = F_s(mu) (1 -
+    tint) / (mu (1 - mu)^6)``, ``mu = 1/7``. ``tint = 1`` is plain Schlick. ``f0``, ``tint``
+    (3,); ``cos`` (N,) in [0, 1].
+    """
+    mu = F82_COS
+    a = (f0 + (1.0 - f0) * (1.0 - mu) ** 5) * (1.0 - tint) / (mu * (1.0 - mu) ** 6)
+    x = 1.0 - cos
+    return schlick_fresnel(f0, cos) - (cos * x**6)[:, None] * a[None, :]
+
+
+def zeltner_albedo(cos: jax.Array, r: jax.Array) -> jax.Array:
+    """Directional albedo of Zeltner's sheen (Zeltner, Burley, Chiang 2022, "Practical
+    Multiple-Scattering Sheen Using Linearly Transformed Cosines", their Gaussian fit, as
+    in github.com/tizian/ltc-sheen and MaterialX's ``mx_zeltner_sheen_dir_albedo``), (N,):
+    ``exp(-((c - m)/s)^2 / 2) / (s sqrt(2 pi)) + o`` with rational ``s, m, o`` of ``r``.
+    ``cos`` (N,); ``r`` the sheen roughness in [0.01, 1] (the fit's range)."""
+    s = r * (0.0206607 + 1.58491 * r) / (0.0379424 + r * (1.32227 + r))
+    m = r * (-0.193854 + r * (-1.14885 + r * (1.7932 - 0.95943 * r * r))) / (0.046391 + r)
+    o = r * (0.000654023 + (-0.0207818 + 0.119681 * r) * r) / (1.26264 + r * (-1.92021 + r))
+    return jnp.exp(-0.5 * ((cos - m) / s) ** 2) / (s * jnp.sqrt(2.0 * jnp.pi)) + o
+
+
+def zeltner_sheen(wi: jax.Array, wo: jax.Array, cos_o: jax.Array, r: jax.Array) -> jax.Array:
+    """Zeltner's LTC sheen lobe without its albedo: ``D_ltc(wi) / cos_i`` (1/sr), (N,), so
+    that the sheen BRDF is ``color E(cos_o) D_ltc / cos_i`` (:func:`zeltner_albedo`).
+
+    ``cos_o`` is ``N.V`` as the caller takes it (MaterialX clamps it to [1e-8, 1]). The
+    frame has ``x`` along ``t = wo - n cos_o`` (the tangential part of ``wo``; ``x``, ``y``
+    of the shading frame where ``t = 0``) and ``y = n x x``; ``w = M^-1 wi = (a wx + b wz, a
+    wy, wz)`` with ``a, b`` the paper's rational fits of ``(cos_o, r)``; ``D_ltc = (wz / pi)
+    (a / |w|^2)^2``, so ``D_ltc / cos_i = (a / |w|^2)^2 / pi``. ``r`` in [0.01, 1].
+    """
+    c = cos_o
+    a = (2.58126 * c + 0.813703 * r) * r / (1.0 + 0.310327 * c * c + 2.60994 * c * r)
+    b = jnp.sqrt(jnp.maximum(1.0 - c, 0.0)) * (r - 1.0) * r**3
+    b = b / (0.0000254053 + 1.71228 * c - 1.71506 * c * r + 1.34174 * r * r)
+    t = wo - jnp.stack([jnp.zeros_like(c), jnp.zeros_like(c), c], axis=-1)
+    t2 = jnp.sum(t * t, axis=-1)
+    ok = t2 > 0.0
+    inv = jnp.where(ok, jax.lax.rsqrt(jnp.where(ok, t2, 1.0)), 0.0)
+    tx = jnp.where(ok, t[:, 0] * inv, 1.0)
+    ty = jnp.where(ok, t[:, 1] * inv, 0.0)
+    wx = wi[:, 0] * tx + wi[:, 1] * ty + wi[:, 2] * t[:, 2] * inv
+    wy = wi[:, 1] * tx - wi[:, 0] * ty  # y = n x t
+    wz = wi[:, 2]
+    len2 = (a * wx + b * wz) ** 2 + (a * wy) ** 2 + wz**2
+    return (a / len2) ** 2 * INV_PI

@@ -4,9 +4,11 @@ Parameters are drawn inside the bounds, exactly on each bound, and a hair inside
 (1e-40 above a bound of 0, the next float below 1, 1e30 for an unbounded scale). Each
 export must be one its renderer parses -- Mitsuba 3 loads the dict (``load_dict``) and
 the written XML (``load_file``); the glTF is strict JSON with every value inside the
-glTF 2.0 schema's ranges; the MaterialX is XML -- every number in the files is finite
-and 0 or float32-normal, and the reported error is the one an independent evaluation
-measures (Mitsuba's own ``eval``, the glTF spec's BRDF written in tests/export/test_export.py);
+glTF 2.0 schema's ranges; the MaterialX is XML with every input in the ``open_pbr_surface``
+nodedef's range -- every number in the files is finite and 0 or float32-normal, and the
+reported error is the one an independent evaluation measures (Mitsuba's own ``eval``, the
+glTF spec's BRDF written in tests/export/test_export.py, MaterialX's own node graph
+interpreted in tests/references_openpbr.py);
 an exact export matches the model pointwise. A model whose own values are not finite at
 the drawn parameters must be refused with ExportValueError before any file is written.
 
@@ -33,11 +35,9 @@ from brdffit.export import (
     error_directions,
     evaluate_model,
     export,
-    materialx,
     write_exports,
 )
 from brdffit.export._numbers import FLOAT32_MAX, FLOAT32_TINY
-from brdffit.models._restrict import base_of
 from tests.export.test_export import (
     check_gltf_document,
     gltf_brdf,
@@ -47,6 +47,7 @@ from tests.export.test_export import (
     openpbr_inputs,
     result,
 )
+from tests.references_openpbr import open_pbr_brdf
 
 SPECS = [
     *models.available(),
@@ -162,9 +163,7 @@ def check_exports(mi, spec: str, params: dict, tmp_path, fit: bool = False, ever
     """Export ``spec`` at ``params`` to every target it supports and check each file;
     Mitsuba evaluates every ``every``-th direction pair (1: all, and the errors)."""
     r = result(spec, params)
-    targets = check_targets(models.from_spec(spec), "mitsuba,gltf") + (
-        ("materialx",) if "open" in _materialx_reason(spec) else ()
-    )
+    targets = check_targets(models.from_spec(spec), "mitsuba,gltf,materialx")
     wi, wo = error_directions()
     ref = model_fcos(r, wi, wo)
     if not np.all(np.isfinite(ref)):  # the model itself cannot be evaluated there
@@ -182,12 +181,20 @@ def check_exports(mi, spec: str, params: dict, tmp_path, fit: bool = False, ever
         elif target == "gltf":
             check_gltf(e, ref, wi, wo)
         else:
-            assert ET.fromstring(e.files[".mtlx"]).tag == "materialx"
-            openpbr_inputs(e.files[".mtlx"])  # every input in [0, 1]
+            check_materialx(e, ref, wi, wo)
 
 
-def _materialx_reason(spec: str) -> str:
-    return materialx.unsupported(base_of(models.from_spec(spec))) or "open"
+def check_materialx(e, ref, wi, wo) -> None:
+    """XML with every input in the nodedef's range; MaterialX's own graph
+    (tests/references_openpbr.py) on the written inputs gives the reported error."""
+    assert ET.fromstring(e.files[".mtlx"]).tag == "materialx"
+    got = open_pbr_brdf(openpbr_inputs(e.files[".mtlx"]), wi, wo) * wi[:, 2:3]
+    # float64 both sides, 9 digits written: ~1e-9 relative per value, so 1e-5 of the error
+    # or 1e-7 absolute (an exact export's error is round-off, the written digits' is 1e-9)
+    assert close(rel_rms(got, ref), e.error, 1e-5, 1e-7), (rel_rms(got, ref), e.summary())
+    assert close(log_err(got, ref), e.log_error, 1e-5, 1e-7), e.summary()
+    if e.exact:
+        np.testing.assert_allclose(got, ref, rtol=1e-6, atol=1e-7 * np.abs(ref).max() + 1e-15)
 
 
 @pytest.mark.parametrize("which", range(4), ids=["low", "near_low", "near_high", "high"])
@@ -228,7 +235,7 @@ def test_fitted_exports_at_bounds(mi, spec, which, tmp_path):
         ("disney[clearcoat=false]", {"metallic": 1.0, "sheen_tint": 1e-39}, "mitsuba"),
         ("disney[clearcoat=false]", {"metallic": 1.0, "specular_tint": 6.1e-19}, "mitsuba"),
         ("lambert", {"kd": [1e-40, 1.0 - 1e-16, 0.5]}, "gltf"),
-        ("lambert", {"kd": [1e-40, 1.0 - 1e-16, 0.5]}, "materialx"),
+        ("openpbr", {"base_color": [1e-40, 1.0 - 1e-16, 0.5]}, "materialx"),
     ],
 )
 def test_exact_mappings_stay_exact_at_extreme_values(mi, spec, params, target, tmp_path):

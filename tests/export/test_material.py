@@ -92,7 +92,7 @@ def test_material_command_writes_the_chosen_form_and_says_what_it_is(tmp_path, c
     code = main([str(a) for a in argv + ["--reference", "none", "--no-progress"]])
     out, err = capsys.readouterr()
     assert code == 0, err
-    assert "chosen: lambert -> " in out and "render-space error against the measurement" in out
+    assert "chosen: openpbr" in out and "render-space error against the measurement" in out
     assert (tmp_path / "out" / "matte.mtlx").is_file()
     assert len([ln for ln in out.splitlines() if "score" in ln and "k=" in ln]) == len(
         FORMS["materialx"]

@@ -24,7 +24,7 @@ def _at_defaults(spec: str) -> tuple[str, dict]:
 
 def _cases(target: str) -> list[tuple[str, dict]]:
     exact = [(spec, params) for spec, params, targets in EXACT if target in targets]
-    fitted = [APPROX[0]] if target == "gltf" else []
+    fitted = [APPROX[0]] if target in ("gltf", "materialx") else []
     return exact + fitted + [_at_defaults(s) for s in FORMS[target]]
 
 
