@@ -201,8 +201,11 @@ def phong_ref(model, p, g):
 
 
 # --- microfacet models -------------------------------------------------------------------
-def _walter_roughness(model, p):
-    return (p["alpha_x"], p["alpha_y"]) if model.anisotropic else (p["alpha"], p["alpha"])
+def _walter_roughness(model, p, s=""):
+    """(alpha_x, alpha_y) of the lobe whose names end in ``s`` (``""``, ``"_1"``, ...)."""
+    if model.anisotropic:
+        return p["alpha_x" + s], p["alpha_y" + s]
+    return p["alpha" + s], p["alpha" + s]
 
 
 def _walter_g1(model, v, ax, ay):
@@ -224,11 +227,11 @@ def _walter_g1(model, v, ax, ay):
     return g1, 1 / g1 - 1  # G1 and Lambda
 
 
-@per_pair
-def walter_ref(model, p, g):
-    """Walter et al. 2007 eqs. 20, 23, 25, 27, 33, 34 (anisotropic D: Heitz 2014 eqs. 82, 85):
-    ``kd/pi + ks F(wi.h) G D / (4 cos_i cos_o)``; ``ks`` is 1 when the model has none."""
-    ax, ay = _walter_roughness(model, p)
+def _walter_lobe(model, p, g, s):
+    """One specular lobe, names ending in ``s``: ``ks F(wi.h) G D / (4 cos_i cos_o)``, ``F``
+    Schlick's, or ``mix(Schlick, F_film, film_weight)`` with the thin film (the README's
+    ``iridescent_fresnel`` of KHR_materials_iridescence at ``wi.h``, on base ``f0``)."""
+    ax, ay = _walter_roughness(model, p, s)
     t2 = tan2_stretched(g.th, g.ph, ax, ay)
     cos4 = mp.cos(g.th) ** 4
     if model.distribution == "ggx":
@@ -239,10 +242,49 @@ def walter_ref(model, p, g):
     g1_o, lam_o = _walter_g1(model, g.wo, ax, ay)
     gg = 1 / (1 + lam_i + lam_o) if model.masking == "height_correlated" else g1_i * g1_o
     lobe = gg * d / (4 * g.ci * g.co)
-    spec = [schlick(f0, g.cd) * lobe for f0 in rgb(p["f0"])]
-    if "ks" in p:
-        spec = [a * b for a, b in zip(spec, rgb(p["ks"]), strict=True)]
-    return add(lambert(p["kd"]), spec) if "kd" in p else spec
+    f0 = rgb(p["f0" + s])
+    fres = [schlick(x, g.cd) for x in f0]
+    if getattr(model, "thin_film", False):
+        from tests.references_gltf import F0_FLOOR, iridescent_fresnel
+
+        w = p["film_weight"]
+        film = iridescent_fresnel(g.cd, p["film_thickness"], p["film_ior"], f0, f0_floor=F0_FLOOR)
+        fres = [x + w * (y - x) for x, y in zip(fres, film, strict=True)]
+    spec = [f * lobe for f in fres]
+    if "ks" + s in p:
+        spec = [a * b for a, b in zip(spec, rgb(p["ks" + s]), strict=True)]
+    return spec
+
+
+@per_pair
+def walter_ref(model, p, g):
+    """Walter et al. 2007 eqs. 20, 23, 25, 27, 33, 34 (anisotropic D: Heitz 2014 eqs. 82, 85):
+    ``kd/pi + sum_k ks_k F_k(wi.h) G_k D_k / (4 cos_i cos_o)``; ``ks`` is 1 when the model has
+    none; names carry ``_k`` with ``n_lobes > 1``. Options, from tests/references_gltf.py's
+    transcriptions of the glTF extensions: ``thin_film`` (``_walter_lobe``); ``sheen``, the
+    KHR_materials_sheen lobe ``sheen_color D_charlie V`` with ``a = sheen_roughness^2``,
+    ``D_charlie = (2 + 1/a) sin(theta_h)^(1/a) / (2 pi)`` and Neubelt's ``V = 1 / (4 (cos_i +
+    cos_o - cos_i cos_o))`` (no floor on ``sin theta_h``); ``clearcoat``, KHR_materials_clearcoat
+    over all of it: ``(1 - c F_c) f + c F_c D V`` of GGX ``clearcoat_alpha``, ``F_c`` Schlick
+    with F0 0.04 at ``N.V``."""
+    n = getattr(model, "n_lobes", 1)
+    suffixes = [""] if n == 1 else [f"_{k}" for k in range(1, n + 1)]
+    spec = [mp.mpf(0)] * 3
+    for s in suffixes:
+        spec = add(spec, _walter_lobe(model, p, g, s))
+    out = add(lambert(p["kd"]), spec) if "kd" in p else spec
+    if getattr(model, "sheen", False):
+        a = p["sheen_roughness"] ** 2
+        sin_h = mp.sqrt(g.h[0] ** 2 + g.h[1] ** 2)
+        d = (2 + 1 / a) * sin_h ** (1 / a) / (2 * mp.pi)
+        out = add(out, scale(d / (4 * (g.ci + g.co - g.ci * g.co)), p["sheen_color"]))
+    if getattr(model, "clearcoat", False):
+        from tests.references_gltf import _dv
+
+        fc = p["clearcoat"] * (num("0.04") + num("0.96") * (1 - g.co) ** 5)
+        coat = _dv(p["clearcoat_alpha"], g)
+        out = [x * (1 - fc) + fc * coat for x in out]
+    return out
 
 
 @per_pair

@@ -63,8 +63,8 @@ that is off has no parameter and no operation):
   1/a) sin(theta_h)^(1/a) / (2 pi)``, ``V_neubelt = 1 / (4 (cos_i + cos_o - cos_i
   cos_o))`` (Neubelt and Pettineo 2013). As in ``KHR_materials_sheen``'s reference without
   its optional albedo scaling of the base (which needs a tabulated albedo), so a glTF
-  export carries the lobe as it is. ``sin^2 theta_h`` is floored at
-  :data:`~brdffit.models._terms.CHARLIE_FLOOR`.
+  export carries the lobe as it is. No floor on ``sin^2 theta_h``: ``D`` is exactly 0 at
+  ``h`` = normal (:func:`~brdffit.models._terms.charlie_d`).
 * ``clearcoat``: glTF's ``KHR_materials_clearcoat`` layer over everything above:
   ``f = (1 - c F_c) f_base + c F_c D_c V_c``, ``F_c = 0.04 + 0.96 (1 - cos_o)^5`` (an
   IOR 1.5 coat, Schlick at the viewer's ``N.V`` as the extension's reference writes it:
@@ -260,7 +260,7 @@ class Walter(AbstractModel):
             f = f + _terms.lambert(params["kd"])
         if self.sheen:
             a = params["sheen_roughness"] ** 2
-            d = _terms.charlie_d(g.h, a, _terms.CHARLIE_FLOOR) * _terms.neubelt_v(g.cos_i, g.cos_o)
+            d = _terms.charlie_d(g.h, a) * _terms.neubelt_v(g.cos_i, g.cos_o)
             f = f + params["sheen_color"][None, :] * d[:, None]
         if self.clearcoat:
             coat = _terms.ggx_dv(g.h, g.wi, g.wo, params["clearcoat_alpha"])
