@@ -111,7 +111,7 @@ render_check's own Monte Carlo noise is 2-5% relative RMSE under an environment,
 of the score is below what a render shows."""
 
 ALBEDO_VIEWS_DEG = (0.0, 30.0, 60.0, 75.0)
-LIGHT = np.array([3.0, 3.0, 4.0]) / 5.0
+LIGHT = np.array([3.0, 3.0, 4.0]) / np.sqrt(34.0)
 """Direction toward the light of the point-light sphere (render_check's light position)."""
 PIXELS, SUBSAMPLES = 48, 3
 

@@ -73,6 +73,18 @@ def test_a_lobe_narrower_than_a_pixel_adds_only_what_it_shows(matte):
     np.testing.assert_allclose(e.ratio, (body + 1.0) / body, rtol=0.02)
 
 
+def test_the_scoring_directions_are_unit_and_the_sphere_sees_one_light():
+    """Every direction the scores evaluate is a unit vector (the light was (3, 3, 4) / 5,
+    of length 1.17, so every model saw cos_i 17% high and a wrong half vector), and on the
+    point-light sphere the angle between light and viewer is the scene's in every pixel."""
+    from brdffit.export.material import LIGHT, _albedo_pairs, _sphere_pairs
+
+    wi, wo, _ = _sphere_pairs()
+    for v in (wi, wo, *_albedo_pairs()[:2]):
+        np.testing.assert_allclose(np.linalg.norm(v, axis=1), 1.0, rtol=1e-12)
+    np.testing.assert_allclose(np.sum(wi * wo, axis=1), LIGHT[2], rtol=1e-12)
+
+
 def test_choose_takes_the_simplest_form_within_the_tolerance():
     def form(k: int, score: float) -> Form:
         r = dataclasses.replace(_lambert_result(KD), n_free=k)
