@@ -24,7 +24,7 @@ specifications ``KHR_materials_specular``, ``_ior``, ``_anisotropy``, ``_clearco
 * Iridescence: ``F_d = mix(F_d, F_film(f0_d), iridescence)`` (so the diffuse weight is
   ``1 - max`` of the mixed Fresnel) and ``F_m = mix(F_m, F_film(baseColor), iridescence)``,
   ``F_film`` the thin film's reflectance at ``|V.H|`` on a base of that normal
-  reflectance (:func:`brdffit.models._terms.thin_film_fresnel`, evaluated through JAX in
+  reflectance (:func:`brdffit.models._films.thin_film_fresnel`, evaluated through JAX in
   float64), thickness ``iridescenceThicknessMaximum`` (no texture), as
   :mod:`brdffit.models.gltf_pbr` documents (the extension's text; the sample viewer
   evaluates ``F_film`` at ``N.V`` instead).
@@ -44,10 +44,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from brdffit.models import _terms
+from brdffit.models import _films
 
 INV_PI = 1.0 / np.pi
-_THIN_FILM = jax.jit(_terms.thin_film_fresnel)
+_THIN_FILM = jax.jit(_films.thin_film_fresnel)
 
 
 def _dot2(v: np.ndarray, u: np.ndarray) -> np.ndarray:
@@ -91,7 +91,7 @@ def charlie_sheen(wi: np.ndarray, wo: np.ndarray, roughness: float) -> np.ndarra
 def thin_film(cos: np.ndarray, thickness: float, ior: float, f0: np.ndarray) -> np.ndarray:
     """The film's reflectance (N, 3) at incidence cosines ``cos`` (N,) on a base of normal
     reflectance ``f0`` (3,), ``thickness`` in nm, index ``ior``
-    (:func:`brdffit.models._terms.thin_film_fresnel`, compiled once per shape)."""
+    (:func:`brdffit.models._films.thin_film_fresnel`, compiled once per shape)."""
     args = (cos, float(thickness), float(ior), np.asarray(f0, float))
     return np.asarray(_THIN_FILM(*(jnp.asarray(a, jnp.float64) for a in args)))
 

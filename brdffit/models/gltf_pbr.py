@@ -39,7 +39,7 @@ V (viewer), ``h`` the half vector:
   dielectric thin film of index ``iridescence_ior`` and thickness
   ``iridescence_thickness`` (nm; the extension's ``iridescenceThicknessMaximum``, the
   thickness without a thickness texture) between the air and the base. ``F_film(f0)``
-  is :func:`~brdffit.models._terms.thin_film_fresnel` (Schlick at both interfaces, the
+  is :func:`~brdffit.models._films.thin_film_fresnel` (Schlick at both interfaces, the
   Airy sum's terms ``m <= 2`` integrated over the spectrum in Fourier space, optical path
   difference ``2 iridescence_ior thickness cos(theta_2)`` with the refracted angle
   ``theta_2``, as the extension's text since 2024 and its sample viewer), the base read
@@ -68,7 +68,7 @@ V (viewer), ``h`` the half vector:
   - ``F_film``'s guards are the sample viewer's (``iridescence.glsl``): the film's index
     goes to 1 as the thickness goes to 0 (smoothstep over 0.03 nm) and the base ``f0``
     is clamped to 0.9999, where the text adds 1e-4 to ``f0``; brdffit also floors ``f0``
-    at 1e-12 (:func:`~brdffit.models._terms.thin_film_fresnel`). The sample viewer
+    at 1e-12 (:func:`~brdffit.models._films.thin_film_fresnel`). The sample viewer
     switches the film off at a thickness of exactly 0, the text does not: a fit on the
     lower bound renders without the film there.
 
@@ -120,7 +120,7 @@ import jax.numpy as jnp
 from brdffit.core.abstract_model import AbstractModel
 from brdffit.core.geometry import ShadingGeometry
 from brdffit.core.parameters import Parameter, Params
-from brdffit.models import _terms
+from brdffit.models import _films, _terms
 
 COAT_F0 = 0.04
 """Normal-incidence reflectance of the clear coat, IOR 1.5 (KHR_materials_clearcoat)."""
@@ -179,8 +179,8 @@ def charlie_sheen(g: ShadingGeometry, a: jax.Array) -> jax.Array:
 def film_mix(params: Params, g: ShadingGeometry, f: jax.Array, f0: jax.Array) -> jax.Array:
     """``mix(f, F_film(f0), iridescence)``, (N, 3): a Fresnel ``f`` (N, 3) mixed with the
     reflectance of the film on a base of normal reflectance ``f0`` (3,), at ``V.H``
-    (:func:`~brdffit.models._terms.thin_film_fresnel`; module docstring)."""
-    film = _terms.thin_film_fresnel(
+    (:func:`~brdffit.models._films.thin_film_fresnel`; module docstring)."""
+    film = _films.thin_film_fresnel(
         g.cos_d, params["iridescence_thickness"], params["iridescence_ior"], f0
     )
     return f + params["iridescence"] * (film - f)

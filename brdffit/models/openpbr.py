@@ -51,7 +51,8 @@ top + base * throughput(top)``. ``wi`` = L, ``wo`` = V, ``c_v = cos_o``, ``c_d =
 * Fuzz (option ``fuzz``): Zeltner's LTC sheen, ``fuzz = fuzz_weight fuzz_color E_z(c_v)
   D_ltc / cos_i`` (:func:`~brdffit.models._terms.zeltner_sheen`, ``zeltner_albedo``), the
   roughness clamped to ``[0.01, 1]`` as MaterialX does.
-* Thin film (option ``thin_film``): MaterialX's Airy Fresnel (:func:`airy_fresnel`, RGB)
+* Thin film (option ``thin_film``): MaterialX's Airy Fresnel
+  (:func:`~brdffit.models._films.airy_fresnel`, RGB)
   in place of ``F`` in the dielectric and metal lobes and their ``comp``, blended by
   ``w = thin_film_weight``: ``spec_d = lerp(spec_d, spec_d^tf, w)``, ``metal`` likewise,
   ``T_d = max(0, 1 - w E comp^tf - (1 - w) E comp)`` (``E`` keeps ``F0 = e^2``: MaterialX
@@ -79,8 +80,9 @@ the interference terms have died out) and ``thin_film_ior`` in [1, 3].
 
 Guards, each leaving the value unchanged where it is defined: ``sqrt`` of
 ``specular_weight`` and of the Airy sum's ``R12 R23`` and phase terms is taken of a
-sanitised value (0 gives 0 with a zero derivative, :func:`_sqrt0`); the film's phases use
-``atan2(0, 0) = 0`` with a zero derivative (:func:`_atan2`: a film whose index equals its
+sanitised value (0 gives 0 with a zero derivative,
+:func:`~brdffit.models._films.sqrt0`); the film's phases use ``atan2(0, 0) = 0`` with a
+zero derivative (``_films._atan2``: a film whose index equals its
 base's, where ``R23 = 0`` multiplies them); the refracted ``cos_t^2`` is floored at
 ``cos^2`` (its exact minimum) and ``1 - R12 R23`` at 1e-18 (it is >= ``1 - R12``), which
 float32 rounding reaches only at grazing. Not reciprocal (every throughput is a function
@@ -105,7 +107,7 @@ import jax.numpy as jnp
 from brdffit.core.abstract_model import AbstractModel
 from brdffit.core.geometry import ShadingGeometry
 from brdffit.core.parameters import Parameter, Params
-from brdffit.models import _terms
+from brdffit.models import _films, _terms
 
 EPS = 1e-8
 """MaterialX's ``M_FLOAT_EPS`` (``stdlib/genglsl/lib/mx_math.glsl``)."""
@@ -218,118 +220,6 @@ def clamped(g: ShadingGeometry) -> ShadingGeometry:
     return eqx.tree_at(lambda t: (t.cos_i, t.cos_o, t.cos_d), g, tuple(cos))
 
 
-def _sqrt0(x: jax.Array) -> jax.Array:
-    """``sqrt(x)`` of ``x >= 0`` (negatives read as 0) with a zero, not infinite,
-    derivative at 0 (the double where)."""
-    pos = x > 0.0
-    return jnp.where(pos, jnp.sqrt(jnp.where(pos, x, 1.0)), 0.0)
-
-
-def _atan2(y: jax.Array, x: jax.Array) -> jax.Array:
-    """``atan2(y, x)`` with ``atan2(0, 0) = 0`` and a finite (zero) derivative there: the
-    phases of a film whose index equals its base's, where ``R23 = 0`` multiplies them."""
-    zero = (y == 0.0) & (x == 0.0)
-    return jnp.arctan2(jnp.where(zero, 0.0, y), jnp.where(zero, 1.0, x))
-
-
-XYZ_TO_CIE_RGB = (
-    (2.3706743, -0.9000405, -0.4706338),
-    (-0.5138850, 1.4253036, 0.0885814),
-    (0.0052982, -0.0146949, 1.0093968),
-)
-"""CIE XYZ to CIE 1931 RGB (illuminant E), rows R, G, B: the matrix of MaterialX's
-``mx_fresnel_airy`` (not Rec. 709's)."""
-
-
-def _polarized(cos: jax.Array, n: jax.Array) -> tuple[jax.Array, jax.Array]:
-    """``(R_p, R_s)`` of a dielectric interface of relative index ``n`` at ``cos``
-    (``mx_fresnel_dielectric_polarized``, or ``mx_fresnel_conductor_polarized`` with
-    ``k = 0``: 1 under total internal reflection).
-
-    MaterialX writes ``R_s = (t1 - t2) / (t1 + t2)``, ``t1 = t0 + cos^2``, ``t2 = 2 sqrt(t0)
-    cos``, ``t0 = n^2 - sin^2``: at ``n`` = 1 the two cancel to ~1e-16 where ``R_s`` is 0,
-    and the Airy sum's ``sqrt(R12 R23)`` turns that into 1e-8 (the 40-digit reference
-    found it). Where ``t0 >= 0`` the same quantities are taken without the difference:
-    ``t1 - t2 = (sqrt(t0) - cos)^2`` and ``sqrt(t0) - cos = (n^2 - 1) / (sqrt(t0) + cos)``,
-    so ``R_s = ((n^2 - 1) / (sqrt(t0) + cos)^2)^2`` and ``R_p = R_s ((cos sqrt(t0) -
-    sin^2) / (cos sqrt(t0) + sin^2))^2``."""
-    c2 = cos**2
-    s2 = 1.0 - c2
-    t0 = n**2 - s2
-    root = _sqrt0(t0)
-    rs_exact = ((n**2 - 1.0) / (root + cos) ** 2) ** 2
-    rp_exact = rs_exact * ((cos * root - s2) / (cos * root + s2)) ** 2
-    t1 = jnp.abs(t0) + c2  # under total internal reflection, MaterialX's form
-    t2 = 2.0 * root * cos
-    rs = (t1 - t2) / (t1 + t2)
-    t3 = c2 * jnp.abs(t0) + s2 * s2
-    t4 = t2 * s2
-    above = t0 >= 0.0
-    return jnp.where(above, rp_exact, rs * (t3 - t4) / (t3 + t4)), jnp.where(above, rs_exact, rs)
-
-
-def airy_fresnel(
-    cos: jax.Array,
-    film_ior: jax.Array,
-    thickness_nm: jax.Array,
-    base_ior: jax.Array,
-    schlick: tuple[jax.Array, jax.Array] | None,
-) -> jax.Array:
-    """MaterialX's thin-film Fresnel ``mx_fresnel_airy`` (Belcour and Barla 2017), RGB (N, 3).
-
-    Air above a film of ``film_ior`` (floored at 1) and ``thickness_nm`` on a base of index
-    ``base_ior`` (3,); ``cos`` on the facet (N,). Polarised Airy sum: ``R12``, ``T121 = 1 -
-    R12`` at the top (exact dielectric), ``R23`` at the base at the refracted ``cos_t``,
-    phases ``phi21`` (0 below Brewster's angle, else pi; pi for s) and ``phi23``, optical
-    path ``2 film_ior cos_t d``, terms ``m = 0, 1, 2`` integrated over the spectrum
-    (:func:`~brdffit.models._terms.sensitivity_xyz`); the mean of the two polarisations
-    goes from XYZ to CIE RGB (:data:`XYZ_TO_CIE_RGB`), clamped to [0, 1].
-
-    Dielectric base (``schlick`` None): exact polarised ``R23`` and its phases (the
-    conductor forms with ``k = 0``). Metal (``schlick = (f0, tint)``): ``base_ior`` is
-    ``(1 + sqrt f0) / (1 - sqrt f0)`` of ``f0`` clamped to [.01, .99], ``R23_p = R23_s =
-    F82(cos_t) / 2`` (:func:`~brdffit.models._terms.f82_schlick`) and ``phi23 = pi`` where
-    ``base_ior < film_ior``, else 0. MaterialX halves ``R23`` there and sums the metal's RGB
-    as if it were XYZ, so even a film of index 1 gives ``M F82 / 2`` (``M`` the matrix), not
-    ``F82``: half as bright and shifted in colour (``tests/models/test_openpbr.py``).
-    """
-    n2 = jnp.maximum(film_ior, 1.0)
-    # >= cos^2 exactly (n2 >= 1): the floor keeps float32 rounding off sqrt(0)
-    cos_t = jnp.sqrt(jnp.maximum(1.0 - (1.0 - cos**2) / n2**2, cos**2))
-    r12p, r12s = _polarized(cos, n2)
-    brewster = 1.0 / jnp.sqrt(1.0 + n2**2)  # cos(atan(n2))
-    phi21 = (jnp.where(cos < brewster, 0.0, jnp.pi)[:, None], jnp.pi)
-    n3 = base_ior[None, :]
-    if schlick is None:
-        r23p, r23s = _polarized(cos_t[:, None], n3 / n2)
-        a = n3**2 - n2**2 * (1.0 - cos_t[:, None] ** 2)  # A of the phase, with k = 0
-        u2, v = jnp.maximum(a, 0.0), _sqrt0(-a)
-        ct = cos_t[:, None]
-        phi23s = _atan2(2.0 * n2 * v * ct, u2 + v * v - (n2 * ct) ** 2)
-        phi23p = _atan2(2.0 * n2 * n3**2 * ct * (0.0 - v), (n3**2 * ct) ** 2 - n2**2 * (u2 + v * v))
-    else:
-        half = 0.5 * _terms.f82_schlick(*schlick, cos_t)
-        r23p = r23s = half
-        phi23p = phi23s = jnp.broadcast_to(jnp.where(n3 < n2, jnp.pi, 0.0), half.shape)
-    opd = (2.0 * n2 * cos_t * thickness_nm)[:, None]
-    total = jnp.zeros(cos.shape + (3,), cos.dtype)
-    parts = ((r12p, r23p, phi23p, phi21[0]), (r12s, r23s, phi23s, phi21[1]))
-    for r12, r23, phi23, p21 in parts:
-        r12 = r12[:, None]
-        t121 = 1.0 - r12
-        # 1 - R12 R23 >= T121, so the floor 1e-18 (its square a float32 normal; met only where
-        # float32 rounds both to 1 at grazing) leaves rs <= T121 and keeps 0/0 out
-        rs = t121**2 * r23 / jnp.maximum(1.0 - r12 * r23, 1e-18)
-        r123 = _sqrt0(r12 * r23)
-        total = total + r12 + rs
-        cm = rs - t121
-        for k in (1.0, 2.0):
-            cm = cm * r123
-            total = total + cm * 2.0 * _terms.sensitivity_xyz(k * opd, k * (phi23 + p21))
-    rgb = (0.5 * total) @ jnp.asarray(XYZ_TO_CIE_RGB, total.dtype).T
-    return jnp.clip(rgb, 0.0, 1.0)
-
-
 @final
 class OpenPbr(AbstractModel):
     """OpenPBR Surface (opaque) as MaterialX's GLSL evaluates it; optional anisotropy,
@@ -374,7 +264,7 @@ class OpenPbr(AbstractModel):
             r = r + cw * (jnp.minimum(1.0, 2.0 * params["coat_roughness"] ** 4 + r**4) ** 0.25 - r)
             ratio = jnp.where(ior / cior > 1.0, ior / cior, cior / ior)
             ior = ior + cw * (ratio - ior)
-        e = _sqrt0(sw) * (ior - 1.0) / (ior + 1.0)  # modulated: F0(eta) = e^2
+        e = _films.sqrt0(sw) * (ior - 1.0) / (ior + 1.0)  # modulated: F0(eta) = e^2
         eta = (1.0 + e) / (1.0 - e)
         ax, ay = alphas(r, params["specular_roughness_anisotropy"] if self.anisotropic else 0.0)
         dg = microfacet(g, ax, ay)[:, None]
@@ -395,8 +285,8 @@ class OpenPbr(AbstractModel):
         if self.thin_film:
             w = params["thin_film_weight"]
             nm, film = 1000.0 * params["thin_film_thickness"], params["thin_film_ior"]
-            f_dt = airy_fresnel(g.cos_d, film, nm, jnp.broadcast_to(eta, (3,)), None)
-            f_mt = airy_fresnel(g.cos_d, film, nm, _f0_to_ior(c), (c, tint))
+            f_dt = _films.airy_fresnel(g.cos_d, film, nm, jnp.broadcast_to(eta, (3,)), None)
+            f_mt = _films.airy_fresnel(g.cos_d, film, nm, _f0_to_ior(c), (c, tint))
             spec, albedo = dielectric(f_d, 1.0 - w)
             spec_t, albedo_t = dielectric(f_dt, w)
             spec, albedo = spec + spec_t, albedo + albedo_t

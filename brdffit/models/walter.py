@@ -75,7 +75,7 @@ that is off has no parameter and no operation):
   model of glTF's ``KHR_materials_iridescence``), for colour-shift foils and flake
   paints whose hue turns with angle: each lobe's Fresnel becomes ``mix(F_schlick(f0),
   F_film(cos_d), film_weight)`` with ``F_film`` the film's reflectance in RGB
-  (:func:`~brdffit.models._terms.thin_film_fresnel`: ``film_thickness`` in nm, its index
+  (:func:`~brdffit.models._films.thin_film_fresnel`: ``film_thickness`` in nm, its index
   ``film_ior``, the base read from ``f0``), as the extension mixes them. The loss is
   periodic in ``film_thickness`` (the hue cycles every ``lambda / (2 film_ior)``), so a
   fit depends on the start screen spreading starts over the whole range.
@@ -99,7 +99,7 @@ import jax
 from brdffit.core.abstract_model import AbstractModel
 from brdffit.core.geometry import ShadingGeometry
 from brdffit.core.parameters import Parameter, Params
-from brdffit.models import _terms
+from brdffit.models import _films, _terms
 
 KD = Parameter("kd", (3,), (0.0, 1.0), 0.3, "logit", "diffuse albedo, RGB", linear=True)
 ALPHA = Parameter("alpha", (), (1e-4, 2.0), 0.2, "log", "roughness alpha, unitless")
@@ -244,7 +244,7 @@ class Walter(AbstractModel):
         )
         f = _terms.schlick_fresnel(params["f0" + s], g.cos_d)
         if self.thin_film:
-            film = _terms.thin_film_fresnel(
+            film = _films.thin_film_fresnel(
                 g.cos_d, params["film_thickness"], params["film_ior"], params["f0" + s]
             )
             f = f + params["film_weight"] * (film - f)

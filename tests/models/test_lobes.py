@@ -23,7 +23,7 @@ import pytest
 from scipy import integrate
 
 from brdffit import models
-from brdffit.models import _terms
+from brdffit.models import _films, _terms
 from tests.export.test_export import gltf_brdf
 from tests.helpers import random_pairs
 from tests.references_gltf import iridescent_fresnel
@@ -146,7 +146,7 @@ def test_the_model_is_jointly_affine_in_its_linear_parameters():
 )
 def test_thin_film_equals_the_iridescence_extension_text(thickness, film_ior, f0):
     cos1 = np.linspace(0.02, 1.0, 60)
-    got = jax.jit(_terms.thin_film_fresnel)(
+    got = jax.jit(_films.thin_film_fresnel)(
         jnp.asarray(cos1), jnp.asarray(thickness), jnp.asarray(film_ior), jnp.asarray(f0)
     )
     want = np.array(
@@ -162,12 +162,12 @@ def test_thin_film_colours_follow_the_cie_tables():
 
     cmfs = colour.MSDS_CMFS["CIE 1931 2 Degree Standard Observer"]
     lam, xyz = cmfs.wavelengths * 1e-9, cmfs.values
-    m = np.asarray(_terms.XYZ_TO_REC709)
+    m = np.asarray(_films.XYZ_TO_REC709)
     for opd in (0.0, 150.0, 300.0, 600.0, 1000.0):
         for shift in (0.0, math.pi / 2, math.pi):
             c = np.cos(2 * math.pi * opd * 1e-9 / lam + shift)
             ref = m @ (np.trapezoid(xyz * c[:, None], lam, axis=0) / np.trapezoid(xyz[:, 1], lam))
-            got = _terms._sensitivity(jnp.array([[opd]]), jnp.full((1, 3), shift))[0]
+            got = _films._sensitivity(jnp.array([[opd]]), jnp.full((1, 3), shift))[0]
             np.testing.assert_allclose(np.asarray(got), ref, atol=0.05 if opd <= 300 else 0.12)
 
 
@@ -179,7 +179,7 @@ def test_a_film_of_weight_zero_is_the_plain_lobe_and_colour_turns_with_angle():
     zero = p | {"film_weight": 0.0, "film_thickness": 400.0, "film_ior": 1.5}
     np.testing.assert_allclose(film.eval(zero, wi, wo), plain.eval(p, wi, wo), rtol=1e-12)
     on = zero | {"film_weight": 1.0}
-    f = _terms.thin_film_fresnel(
+    f = _films.thin_film_fresnel(
         jnp.linspace(0.05, 1.0, 20), jnp.asarray(400.0), jnp.asarray(1.5), jnp.full(3, 0.04)
     )
     hue = np.asarray(f) / np.asarray(f).sum(axis=1, keepdims=True)

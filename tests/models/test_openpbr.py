@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 
 from brdffit.export.materialx import f82_tint_floor
-from brdffit.models import _terms, openpbr
+from brdffit.models import _films, _terms, openpbr
 from brdffit.models.check import params_at_bounds
 from tests.cases import CASES
 from tests.helpers import random_pairs, random_params
@@ -151,12 +151,12 @@ def test_a_film_of_index_one_leaves_the_base_fresnel():
     polarisation and converts the metal's RGB as if it were XYZ)."""
     cos = jnp.linspace(0.02, 1.0, 50)
     one, d = jnp.asarray(1.0), jnp.asarray(400.0)
-    got = openpbr.airy_fresnel(cos, one, d, jnp.full(3, 1.7), None)
+    got = _films.airy_fresnel(cos, one, d, jnp.full(3, 1.7), None)
     want = _terms.fresnel_dielectric(cos, jnp.asarray(1.7))[:, None]
     np.testing.assert_allclose(got, np.broadcast_to(want, got.shape), rtol=2e-7)  # B row: 1 + 1e-7
     f0, tint = jnp.array([0.9, 0.6, 0.3]), jnp.array([1.0, 0.8, 0.6])
-    got = openpbr.airy_fresnel(cos, one, d, openpbr._f0_to_ior(f0), (f0, tint))
-    matrix = np.asarray(openpbr.XYZ_TO_CIE_RGB)
+    got = _films.airy_fresnel(cos, one, d, openpbr._f0_to_ior(f0), (f0, tint))
+    matrix = np.asarray(_films.XYZ_TO_CIE_RGB)
     want = np.clip(0.5 * np.asarray(_terms.f82_schlick(f0, tint, cos)) @ matrix.T, 0.0, 1.0)
     # R12 is 0 to round-off (1e-17), and sqrt(R12 R23) enters the sum: 1e-8
     np.testing.assert_allclose(got, want, rtol=1e-7)
