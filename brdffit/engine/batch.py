@@ -24,6 +24,7 @@ from brdffit.engine import objective as objective_mod
 from brdffit.engine.objective import Objective
 from brdffit.engine.settings import Settings
 from brdffit.engine.uncertainty import Outcome
+from brdffit.util.memo import per_object
 from brdffit.util.programs import program
 
 COARSE_FLOOR = 2_000
@@ -254,6 +255,12 @@ def _subset(
     """
     if n is None:
         return prep
+    return per_object(prep, ("thinned", n), lambda: _thin(prep, n, like))
+
+
+def _thin(prep: metrics_mod.Prepared, n: int, like: metrics_mod.Prepared | None):
+    """:func:`_subset`, computed (once per ``prep`` and ``n``: the thinned data and their
+    padded copy live as long as the data set's prepared arrays)."""
     idx = np.linspace(0, prep.n - 1, n).round().astype(np.int64)
     if like is None:
         return prep.take(idx)

@@ -41,6 +41,7 @@ from jaxtyping import Array, Bool, Float
 from brdffit.core.geometry import ShadingGeometry, shading_geometry
 from brdffit.core.measurements import Measurements
 from brdffit.errors import ParameterError
+from brdffit.util.memo import per_object
 from brdffit.util.programs import program
 
 L1_DELTA = 1e-3
@@ -180,8 +181,13 @@ class Prepared(eqx.Module):
         return Prepared(g, cos_i, target, weight, values, self.log1p, self.l1, self.root)
 
     def padded(self, geometry: Prepared | None = None) -> Prepared:
-        """:meth:`pad` to :func:`shape_bucket` of the sample count."""
-        return self.pad(shape_bucket(self.n), geometry)
+        """:meth:`pad` to :func:`shape_bucket` of the sample count; computed once per
+        :class:`Prepared` (:func:`brdffit.util.memo.per_object`: a fit pads the data for
+        every metric, and a sweep fits one data set many times)."""
+        size = shape_bucket(self.n)
+        if size == self.n:  # itself (kept out of the memo: a value must not hold its owner)
+            return self
+        return per_object(self, "padded", lambda: self.pad(size, geometry))
 
     def _rows(self, f) -> Prepared:
         """Every per-sample array mapped by ``f`` (numpy in, numpy out), same metric."""
@@ -225,7 +231,19 @@ def prepare(
 def prepare_all(
     data: Measurements, *, cut_deg: float | None = 80.0, keep: np.ndarray | None = None
 ) -> dict[str, Prepared]:
-    """:func:`prepare` for every metric, sharing one geometry; name -> Prepared."""
+    """:func:`prepare` for every metric, sharing one geometry; name -> Prepared.
+
+    Without ``keep``, computed once per data set and cut while the data set lives
+    (:func:`brdffit.util.memo.per_object`): every fit of a sweep to one material, and a
+    fit's thinned and padded copies of it, reuse the same arrays."""
+    if keep is None:
+        return per_object(data, ("prepare_all", cut_deg), lambda: _prepare_all(data, cut_deg))
+    return _prepare_all(data, cut_deg, keep)
+
+
+def _prepare_all(
+    data: Measurements, cut_deg: float | None, keep: np.ndarray | None = None
+) -> dict[str, Prepared]:
     keep = _keep_indices(data, cut_deg, keep)
     g = _geometry(data.wi[keep], data.wo[keep])
     return {m.name: _prepared(data, m, keep, g) for m in METRICS.values()}
