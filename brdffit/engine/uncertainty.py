@@ -238,7 +238,9 @@ def assemble(
     finite = math.isfinite(rss)
     aic = n_data * math.log(rss / n_data) + 2 * k if finite else float("nan")
     bic = n_data * math.log(rss / n_data) + k * math.log(n_data) if finite else float("nan")
-    every = {k: padded if k == m.name else p.padded(padded) for k, p in preps.items()}
+    # padded here and let go (pad, not the kept ``padded``): kept, the other metrics'
+    # copies would be held through every later descent on these data
+    every = {k: padded if k == m.name else p.pad(padded.n, padded) for k, p in preps.items()}
     losses = {k: float(v) for k, v in objective_mod.all_losses(model, params, every).items()}
     at_bound = _at_bound(layout, params, out.binding)
     return FitResult(
