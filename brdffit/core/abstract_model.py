@@ -63,8 +63,9 @@ class AbstractModel(eqx.Module):
         """
 
     def evaluate(self, params: Params, g: ShadingGeometry) -> Float[Array, "n 3"]:
-        """:meth:`core` with samples below the horizon set to zero."""
-        f = self.core(params, g)
+        """:meth:`core` with samples below the horizon set to zero (``params`` may hold
+        NumPy arrays, as the host's bookkeeping makes them)."""
+        f = self.core({k: jnp.asarray(v) for k, v in params.items()}, g)
         f = jnp.broadcast_to(f, g.cos_i.shape + (3,))
         return jnp.where(g.above[:, None], f, jnp.zeros((), f.dtype))
 

@@ -27,11 +27,16 @@ from typing import Literal
 import jax
 import jax.numpy as jnp
 import numpy as np
+from scipy.special import expit
 
 from brdffit.errors import ParameterError
 
 Transform = Literal["identity", "logit", "log"]
-Params = dict[str, jax.Array]
+AnyArray = jax.Array | np.ndarray | np.generic
+"""A JAX array (traced code) or a NumPy array (the host's bookkeeping, :func:`namespace`)."""
+
+Params = dict[str, AnyArray]
+"""Parameter name -> value: JAX arrays in traced code, NumPy arrays on the host."""
 
 
 @dataclass(frozen=True)
@@ -130,36 +135,41 @@ class Parameter:
         """The default broadcast to the parameter's shape."""
         return jnp.full(self.shape, self.default, dtype=dtype)
 
-    def to_natural(self, u: jax.Array) -> jax.Array:
-        """Unconstrained ``u`` -> natural value ``x`` (see module docstring)."""
+    def to_natural(self, u: AnyArray) -> AnyArray:
+        """Unconstrained ``u`` -> natural value ``x`` (see module docstring); NumPy in,
+        NumPy out (:func:`namespace`)."""
         lo, hi = self.bounds
+        xp = namespace(u)
+        sigmoid = jax.nn.sigmoid if xp is jnp else expit
         if self.transform == "identity":
             return u
         if self.transform == "logit":
-            x = lo + (hi - lo) * jax.nn.sigmoid(u)
+            x = lo + (hi - lo) * sigmoid(u)
         elif math.isfinite(hi):
-            x = lo * jnp.exp(math.log(hi / lo) * jax.nn.sigmoid(u))
+            x = lo * xp.exp(math.log(hi / lo) * sigmoid(u))
         else:
-            return lo + jnp.exp(u)
+            return lo + xp.exp(u)
         # rounding can land a few ulp past a bound (10.000000000000009 on [0.001, 10]);
         # keep a value a user could pass back in (``where``: the gradient stays whole)
-        return jnp.where(x > hi, hi, jnp.where(x < lo, lo, x))
+        return xp.where(x > hi, hi, xp.where(x < lo, lo, x))
 
-    def to_unconstrained(self, x: jax.Array) -> jax.Array:
-        """Natural ``x`` -> unconstrained ``u``; ``x`` is first nudged inside the bounds."""
+    def to_unconstrained(self, x: AnyArray) -> AnyArray:
+        """Natural ``x`` -> unconstrained ``u``; ``x`` is first nudged inside the bounds.
+        NumPy in (or a number), NumPy out (:func:`namespace`)."""
         lo, hi = self.bounds
-        x = jnp.asarray(x)
+        xp = namespace(x)
+        x = xp.asarray(x, dtype=float) if xp is np else x
         if self.transform == "identity":
             return x
         if self.transform == "logit":
-            t = jnp.clip((x - lo) / (hi - lo), 1e-12, 1 - 1e-12)
-            return jnp.log(t) - jnp.log1p(-t)
+            t = xp.clip((x - lo) / (hi - lo), 1e-12, 1 - 1e-12)
+            return xp.log(t) - xp.log1p(-t)
         if math.isfinite(hi):
-            t = jnp.clip(jnp.log(jnp.maximum(x, lo) / lo) / math.log(hi / lo), 1e-12, 1 - 1e-12)
-            return jnp.log(t) - jnp.log1p(-t)
-        return jnp.log(jnp.maximum(x - lo, 1e-300))
+            t = xp.clip(xp.log(xp.maximum(x, lo) / lo) / math.log(hi / lo), 1e-12, 1 - 1e-12)
+            return xp.log(t) - xp.log1p(-t)
+        return xp.log(xp.maximum(x - lo, 1e-300))
 
-    def check_value(self, value: object) -> jax.Array:
+    def check_value(self, value: object) -> np.ndarray:
         """Validate a user value: finite, broadcastable to the shape, inside the bounds."""
         arr = np.asarray(value, dtype=float)
         try:
@@ -174,7 +184,7 @@ class Parameter:
             raise ParameterError(
                 f"parameter {self.name!r}: value {arr.tolist()} outside bounds [{lo}, {hi}]"
             )
-        return jnp.asarray(arr.copy())
+        return arr.copy()
 
 
 @dataclass(frozen=True)
@@ -186,7 +196,7 @@ class ParameterLayout:
     """
 
     free: tuple[Parameter, ...]
-    frozen: Mapping[str, jax.Array]
+    frozen: Mapping[str, AnyArray]
 
     @classmethod
     def build(
@@ -217,7 +227,7 @@ class ParameterLayout:
             out += [p.name] if p.shape == () else [f"{p.name}[{c}]" for c in "rgb"]
         return out
 
-    def split(self, flat: jax.Array) -> Params:
+    def split(self, flat: AnyArray) -> Params:
         """Flat free vector -> dict of the free parameters (same space as ``flat``)."""
         out, i = {}, 0
         for p in self.free:
@@ -225,13 +235,13 @@ class ParameterLayout:
             i += p.size
         return out
 
-    def join(self, params: Mapping[str, jax.Array]) -> jax.Array:
+    def join(self, params: Mapping[str, AnyArray]) -> jax.Array:
         """Dict (free parameters, any space) -> flat vector."""
         if not self.free:
             return jnp.zeros((0,))
         return jnp.concatenate([jnp.ravel(jnp.asarray(params[p.name])) for p in self.free])
 
-    def unconstrained(self, params: Mapping[str, jax.Array]) -> jax.Array:
+    def unconstrained(self, params: Mapping[str, AnyArray]) -> jax.Array:
         """Natural dict -> flat unconstrained vector of the free parameters."""
         if not self.free:
             return jnp.zeros((0,))
@@ -240,7 +250,7 @@ class ParameterLayout:
         )
 
     def params(
-        self, flat: jax.Array, space: Literal["natural", "unconstrained", "solver"]
+        self, flat: AnyArray, space: Literal["natural", "unconstrained", "solver"]
     ) -> Params:
         """Flat free vector in ``space`` -> natural dict of every parameter (frozen ones too).
 
@@ -277,8 +287,9 @@ class ParameterLayout:
             z = z.at[i].set(jnp.log(x[i]) + jnp.log(x[j])).at[j].set(1.0 / x[j])
         return z
 
-    def from_solver(self, z: jax.Array) -> jax.Array:
-        """Flat solver -> flat natural vector (traced), the inverse of :meth:`to_solver`.
+    def from_solver(self, z: AnyArray) -> AnyArray:
+        """Flat solver -> flat natural vector, the inverse of :meth:`to_solver` (traced, or
+        NumPy in and out on the host: :func:`namespace`).
 
         A pair's box is the product of its members' boxes, so ``x_i = e^(z_i) z_j`` can
         leave ``x_i``'s bounds: it is clipped there (its bound then holds it, as the box
@@ -286,19 +297,23 @@ class ParameterLayout:
         """
         if not self.free:
             return z
+        xp = namespace(z)
         # exp per parameter, not over the flat vector: XLA's vector and scalar exp differ
         # in the last bit, and a fit's tie-breaks between starts follow that bit
         parts = self.split(z).values()
-        x = jnp.concatenate(
+        x = xp.concatenate(
             [
-                jnp.ravel(jnp.exp(v) if p.solver_log else v)
+                xp.ravel(xp.exp(v) if p.solver_log else v)
                 for p, v in zip(self.free, parts, strict=True)
             ]
         )
         lo, hi = self.bounds_flat()
         for i, j in self.pairs():
-            a = jnp.clip(jnp.exp(z[i]) * z[j], lo[i], hi[i])
-            x = x.at[j].set(1.0 / z[j]).at[i].set(a)
+            a = xp.clip(xp.exp(z[i]) * z[j], lo[i], hi[i])
+            if xp is jnp:
+                x = x.at[j].set(1.0 / z[j]).at[i].set(a)
+            else:
+                x[j], x[i] = 1.0 / z[j], a
         return x
 
     def solver_vector(self, params: Mapping[str, object]) -> np.ndarray:
@@ -342,3 +357,11 @@ class ParameterLayout:
         lo = np.concatenate([np.full(p.size, p.bounds[0]) for p in self.free] or [np.zeros(0)])
         hi = np.concatenate([np.full(p.size, p.bounds[1]) for p in self.free] or [np.zeros(0)])
         return lo, hi
+
+
+def namespace(x: object):
+    """``jax.numpy`` for a JAX array or tracer, ``numpy`` for anything else: the host's
+    bookkeeping of parameter vectors (starts, results) runs in NumPy, because every
+    eager JAX operation compiles a small program per shape (about 10 ms each in a fresh
+    process, a hundred of them in a fit)."""
+    return jnp if isinstance(x, jax.Array) else np

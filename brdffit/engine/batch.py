@@ -12,7 +12,6 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -25,6 +24,8 @@ from brdffit.engine import objective as objective_mod
 from brdffit.engine.objective import Objective
 from brdffit.engine.settings import Settings
 from brdffit.engine.uncertainty import Outcome
+from brdffit.util.memo import per_object
+from brdffit.util.programs import program
 
 COARSE_FLOOR = 2_000
 """Fewest thinned samples the starts descend on: the stress suite (2,000 random samples
@@ -67,7 +68,7 @@ class Engine:
     def __init__(self, obj: Objective, s: Settings, others: list[metrics_mod.Prepared]):
         self.obj, self.s, self.tol, self.others = obj, s, s.tolerances, others
         lo, hi = obj.layout.solver_bounds()
-        self.lo, self.hi = jnp.asarray(lo), jnp.asarray(hi)
+        self.lo, self.hi = np.asarray(lo), np.asarray(hi)
 
     def run(self, preps: list, padded: list, first: dict) -> list[Outcome]:
         """Each problem's outcome from its data ``preps`` (the fit's metric) and the same
@@ -98,7 +99,7 @@ class Engine:
         if s.robust is not None:
             scale = self._robust_scales(st.z, preps)
             scales = [float(v) for v in scale]
-            robj = obj.with_robust(s.robust, jnp.asarray(scale))
+            robj = obj.with_robust(s.robust, np.asarray(scale))
             rzs = np.concatenate([st.z[:, None, :], zs], axis=1)
             plain, st = st, self._stage(robj, rzs, problems)
             origin = np.where((st.pick == 0)[:, None], origin, rzs[rows, st.pick])
@@ -110,7 +111,7 @@ class Engine:
             out.append(
                 Outcome(
                     z=st.z[i], status=status, binding=st.binding[i],
-                    start=obj.params(jnp.asarray(origin[i])), n_steps=int(steps[i]),
+                    start=obj.params(origin[i]), n_steps=int(steps[i]),
                     n_starts=zs.shape[1],
                     coarse=(n_small, int(coarse_steps[i])) if thinned else (0, 0),
                     robust_scale=scales[i],
@@ -130,23 +131,22 @@ class Engine:
         (it stops at once, :attr:`brdffit.engine.lm.Reason.NONFINITE`, and is never picked)."""
         obj = self.obj
         zs = self._select(obj, near, spread, osmall)
-        zs = jnp.concatenate([zs, jnp.full_like(zs[:, :1], jnp.nan)], axis=1)
+        zs = np.concatenate([zs, np.full_like(zs[:, :1], np.nan)], axis=1)
         d = self._descend(obj, zs, osmall)
         cost = np.asarray(d.cost)
         pick = np.argmin(np.where(np.isfinite(cost), cost, np.inf), axis=1)
         best = np.asarray(d.z)[np.arange(len(pick)), pick]
         if len(small) == 1:
-            solved = starts.linear_start_one(self.obj, jnp.asarray(best[0]), small[0])[None]
+            solved = np.asarray(starts.linear_start_one(self.obj, best[0], small[0]))[None]
         else:
-            solved = _linear_many(self.obj, jnp.asarray(best), _stack(small))
+            solved = _linear_many(self.obj, best, _stack(small))
         return np.asarray(solved), np.asarray(d.steps).sum(axis=1)
 
     @staticmethod
     def _select(obj, near, spread, small):
         """Each problem's starts (same draws, its own affine solves), (P, S, k)."""
-        near, spread = jnp.asarray(near), jnp.asarray(spread)
         if len(small) == 1:
-            return starts.select_one(obj, near, spread, small[0])[None]
+            return np.asarray(starts.select_one(obj, near, spread, small[0]))[None]
         return _select_many(obj, near, spread, _stack(small))
 
     def _stage(self, obj, zs, problems: _Problems) -> _Stage:
@@ -166,14 +166,14 @@ class Engine:
     def _descend(self, obj, z, preps) -> lm.Descent:
         """Descents from ``z`` ((P, k), or (P, S, k) for many starts) on ``preps`` (one per
         problem), with a leading problem axis; P = 1 runs unstacked."""
-        z, batch = jnp.asarray(z), lm.batch_size()
+        z, batch = np.asarray(z), lm.batch_size()
         if z.shape[0] == 1:
-            o = obj.with_robust(obj.robust, obj.scale[0]) if obj.scale.ndim else obj
+            o = obj.with_robust(obj.robust, np.asarray(obj.scale)[0]) if obj.scale.ndim else obj
             if z.ndim == 3:
                 d = lm.race_one(o, z[0], preps[0], self.lo, self.hi, self.tol, batch)
             else:
                 d = lm.solve_one(o, z[0], preps[0], self.lo, self.hi, self.tol)
-            return jax.tree.map(lambda a: a[None], d)
+            return jax.tree.map(lambda a: np.asarray(a)[None], d)
         return _solve_many(obj, z, _stack(preps), self.lo, self.hi, self.tol, batch)
 
     def _robust_scales(self, z: np.ndarray, preps) -> np.ndarray:
@@ -183,20 +183,19 @@ class Engine:
             return np.full(z.shape[0], float(self.s.robust_scale))
         out = []
         for i in range(z.shape[0]):
-            zi = jnp.asarray(z[i])
-            r = np.asarray(objective_mod.plain_residuals(self.obj, zi, preps[i]))
+            r = np.asarray(objective_mod.plain_residuals(self.obj, z[i], preps[i]))
             mad = 1.4826 * float(np.median(np.abs(r - np.median(r))))
             spread = mad if mad > 0 else float(np.sqrt(np.mean(r * r)))
             out.append(metrics_mod.ROBUST_TUNING[self.s.robust] * max(spread, 1e-300))
         return np.asarray(out)
 
 
-@eqx.filter_jit
+@program
 def _select_many(obj, near, spread, prep):
     return lax.map(lambda p: starts.select(obj, near, spread, p), prep)
 
 
-@eqx.filter_jit
+@program
 def _linear_many(obj, z, prep):
     return lax.map(lambda args: starts.linear_start(obj, *args), (z, prep))
 
@@ -209,7 +208,7 @@ class _Problems:
         self.full, self.small, self.thinned = full, small, thinned
 
 
-@eqx.filter_jit
+@program
 def _solve_many(obj, z, prep, lo, hi, tol, batch):
     """:func:`brdffit.engine.lm.solve` over stacked problems (and over starts when ``z`` is 3-d),
     ``batch`` at a time (:func:`brdffit.engine.lm.batch_size`); one robust scale per problem
@@ -229,7 +228,7 @@ def _solve_many(obj, z, prep, lo, hi, tol, batch):
 
 
 def _stack(preps: list[metrics_mod.Prepared]) -> metrics_mod.Prepared:
-    return jax.tree.map(lambda *a: jnp.stack(a), *preps)
+    return jax.tree.map(lambda *a: metrics_mod.to_device(np.stack(a)), *preps)
 
 
 def coarse_size(n: int, coarse: int | None) -> int | None:
@@ -256,9 +255,15 @@ def _subset(
     """
     if n is None:
         return prep
+    return per_object(prep, ("thinned", n), lambda: _thin(prep, n, like))
+
+
+def _thin(prep: metrics_mod.Prepared, n: int, like: metrics_mod.Prepared | None):
+    """:func:`_subset`, computed (once per ``prep`` and ``n``: the thinned data and their
+    padded copy live as long as the data set's prepared arrays)."""
     idx = np.linspace(0, prep.n - 1, n).round().astype(np.int64)
     if like is None:
         return prep.take(idx)
     keys = ("target", "weight", "values")
-    own = {k: jnp.asarray(np.asarray(getattr(prep, k))[idx]) for k in keys}
+    own = {k: metrics_mod.to_device(np.asarray(getattr(prep, k))[idx]) for k in keys}
     return dataclasses.replace(like, **own, log1p=prep.log1p, l1=prep.l1, root=prep.root)

@@ -63,6 +63,8 @@ import jax.numpy as jnp
 from jax import lax
 from jaxtyping import Array, Bool, Float, Int
 
+from brdffit.util.programs import program
+
 TAU = 1e-3
 """Initial damping relative to Marquardt's scale: Madsen, Nielsen & Tingleff (2004, sec.
 3.2) recommend 1e-3 for a start that is not known to be close; ours are linear solves."""
@@ -325,7 +327,7 @@ def batch_size() -> int | None:
     return None if jax.default_backend() == "cpu" else 1 << 30
 
 
-@eqx.filter_jit
+@program
 def solve_one(obj: LeastSquares, z0: Array, prep: Any, lo: Array, hi: Array, tol: Tolerances):
     """:func:`solve` compiled for one start."""
     return solve(obj, z0, prep, lo, hi, tol)
@@ -383,5 +385,5 @@ def race(
     return lax.fori_loop(0, len(schedule), rung, states)
 
 
-race_one = eqx.filter_jit(race)
+race_one = program(race)
 """:func:`race` compiled for one problem."""

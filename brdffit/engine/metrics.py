@@ -41,6 +41,8 @@ from jaxtyping import Array, Bool, Float
 from brdffit.core.geometry import ShadingGeometry, shading_geometry
 from brdffit.core.measurements import Measurements
 from brdffit.errors import ParameterError
+from brdffit.util.memo import per_object
+from brdffit.util.programs import program
 
 L1_DELTA = 1e-3
 
@@ -140,9 +142,9 @@ class Prepared(eqx.Module):
     target: Float[Array, "n 3"]
     weight: Float[Array, "n 3"]
     values: Float[Array, "n 3"]
-    log1p: Bool[Array, ""]
-    l1: Bool[Array, ""]
-    root: Bool[Array, ""]
+    log1p: Bool[Array | np.ndarray, ""]
+    l1: Bool[Array | np.ndarray, ""]
+    root: Bool[Array | np.ndarray, ""]
 
     @property
     def n(self) -> int:
@@ -167,25 +169,30 @@ class Prepared(eqx.Module):
             return self
         if geometry is None:
             g, cos_i = jax.tree.map(
-                lambda a: jnp.asarray(np.concatenate([a, np.repeat(np.asarray(a)[:1], extra, 0)])),
+                lambda a: to_device(np.concatenate([a, np.repeat(np.asarray(a)[:1], extra, 0)])),
                 (self.g, self.cos_i),
             )
         else:
             g, cos_i = geometry.g, geometry.cos_i
         target, weight, values = (
-            jnp.asarray(np.concatenate([a, np.zeros((extra, 3))]))
+            to_device(np.concatenate([a, np.zeros((extra, 3))]))
             for a in (self.target, self.weight, self.values)
         )
         return Prepared(g, cos_i, target, weight, values, self.log1p, self.l1, self.root)
 
     def padded(self, geometry: Prepared | None = None) -> Prepared:
-        """:meth:`pad` to :func:`shape_bucket` of the sample count."""
-        return self.pad(shape_bucket(self.n), geometry)
+        """:meth:`pad` to :func:`shape_bucket` of the sample count; computed once per
+        :class:`Prepared` (:func:`brdffit.util.memo.per_object`: a fit pads the data for
+        every metric, and a sweep fits one data set many times)."""
+        size = shape_bucket(self.n)
+        if size == self.n:  # itself (kept out of the memo: a value must not hold its owner)
+            return self
+        return per_object(self, "padded", lambda: self.pad(size, geometry))
 
     def _rows(self, f) -> Prepared:
         """Every per-sample array mapped by ``f`` (numpy in, numpy out), same metric."""
         per_sample = (self.g, self.cos_i, self.target, self.weight, self.values)
-        g, cos_i, target, weight, values = jax.tree.map(lambda a: jnp.asarray(f(a)), per_sample)
+        g, cos_i, target, weight, values = jax.tree.map(lambda a: to_device(f(a)), per_sample)
         return Prepared(g, cos_i, target, weight, values, self.log1p, self.l1, self.root)
 
 
@@ -217,17 +224,35 @@ def prepare(
     Raises :class:`ParameterError` if no sample is left.
     """
     keep = _keep_indices(data, cut_deg, keep)
-    g = shading_geometry(jnp.asarray(data.wi[keep]), jnp.asarray(data.wo[keep]))
+    g = _geometry(data.wi[keep], data.wo[keep])
     return _prepared(data, metric, keep, g)
 
 
 def prepare_all(
     data: Measurements, *, cut_deg: float | None = 80.0, keep: np.ndarray | None = None
 ) -> dict[str, Prepared]:
-    """:func:`prepare` for every metric, sharing one geometry; name -> Prepared."""
+    """:func:`prepare` for every metric, sharing one geometry; name -> Prepared.
+
+    Without ``keep``, computed once per data set and cut while the data set lives
+    (:func:`brdffit.util.memo.per_object`): every fit of a sweep to one material, and a
+    fit's thinned and padded copies of it, reuse the same arrays."""
+    if keep is None:
+        return per_object(data, ("prepare_all", cut_deg), lambda: _prepare_all(data, cut_deg))
+    return _prepare_all(data, cut_deg, keep)
+
+
+def _prepare_all(
+    data: Measurements, cut_deg: float | None, keep: np.ndarray | None = None
+) -> dict[str, Prepared]:
     keep = _keep_indices(data, cut_deg, keep)
-    g = shading_geometry(jnp.asarray(data.wi[keep]), jnp.asarray(data.wo[keep]))
+    g = _geometry(data.wi[keep], data.wo[keep])
     return {m.name: _prepared(data, m, keep, g) for m in METRICS.values()}
+
+
+_geometry = program(shading_geometry)
+"""The data's shading geometry as a stored program (:mod:`brdffit.util.programs`);
+:func:`brdffit.core.geometry.shading_geometry` itself stays a plain ``jax.jit``, which
+JAX's transformations (``vmap``, ``grad`` through the directions) can enter."""
 
 
 LOG_FLOOR = -0.999
@@ -258,24 +283,31 @@ def _prepared(data: Measurements, metric: Metric, keep: np.ndarray, g: ShadingGe
     """:class:`Prepared` of ``metric`` on the samples ``keep`` with geometry ``g``."""
     cos_i = np.asarray(g.cos_i)
     use = channels_used(metric, data.values[keep], cos_i, data.channel_valid[keep])
-    values = jnp.asarray(np.where(use, data.values[keep], 0.0))
+    values = np.where(use, data.values[keep], 0.0)
     return Prepared(
         g=g,
         cos_i=g.cos_i,
-        target=transform_side(metric, values, g.cos_i),
-        weight=jnp.asarray(metric.channel_weights(data, keep, use)),
-        values=values,
-        log1p=jnp.asarray(metric.log1p),
-        l1=jnp.asarray(metric.l1),
-        root=jnp.asarray(metric.root),
+        target=to_device(transform_side(metric, values, cos_i)),
+        weight=to_device(metric.channel_weights(data, keep, use)),
+        values=to_device(values),
+        log1p=np.asarray(metric.log1p),
+        l1=np.asarray(metric.l1),
+        root=np.asarray(metric.root),
     )
 
 
-def transform_side(metric: Metric, f: Array, cos_i: Array) -> Array:
+def to_device(a: np.ndarray) -> Array:
+    """A host array put on the default device as it is (``jax.device_put``:
+    ``jnp.asarray`` of a NumPy array compiles a small program per shape, some 10 ms
+    each in a fresh process)."""
+    return jax.device_put(np.asarray(a))
+
+
+def transform_side(metric: Metric, f: np.ndarray, cos_i: np.ndarray) -> np.ndarray:
     """``f cos_i`` or ``ln(1 + f cos_i)`` (argument floored at :data:`LOG_FLOOR`; the
-    data's channels below it are left out by :func:`prepare`)."""
+    data's channels below it are left out by :func:`prepare`); on the host."""
     x = f * cos_i[:, None]
-    return jnp.log1p(jnp.maximum(x, LOG_FLOOR)) if metric.log1p else x
+    return np.log1p(np.maximum(x, LOG_FLOOR)) if metric.log1p else x
 
 
 def differences(f_model: Array, prep: Prepared) -> Array:
@@ -308,7 +340,7 @@ ROBUST_TUNING = {"huber": 1.345, "cauchy": 2.385}
 """Tuning constants (in units of the residuals' robust sigma) for 95% efficiency."""
 
 
-def robust_residuals(r: Array, kind: str | None, scale: Array | float) -> Array:
+def robust_residuals(r: Array, kind: str | None, scale: Array | np.ndarray | float) -> Array:
     """Residuals whose squares are a robust loss of ``r`` with ``scale`` (residual units).
 
     ``None`` returns ``r``. ``"huber"``: ``rho(r) = r^2`` for ``|r| <= c`` and
@@ -333,7 +365,7 @@ def robust_residuals(r: Array, kind: str | None, scale: Array | float) -> Array:
     raise ParameterError(f"robust={kind!r}: use None, 'huber' or 'cauchy'")
 
 
-def robust_weights(r: Array, kind: str | None, scale: Array | float) -> Array:
+def robust_weights(r: Array, kind: str | None, scale: Array | np.ndarray | float) -> Array:
     """IRLS weights ``rho'(r^2)`` of the robust loss of :func:`robust_residuals`.
 
     The gradient of ``0.5 sum rho(r^2)`` is ``J^T (w r)`` with these ``w``; the
@@ -351,7 +383,10 @@ def robust_weights(r: Array, kind: str | None, scale: Array | float) -> Array:
 
 
 def objective(
-    f_model: Array, prep: Prepared, robust: str | None = None, scale: Array | float = 1.0
+    f_model: Array,
+    prep: Prepared,
+    robust: str | None = None,
+    scale: Array | np.ndarray | float = 1.0,
 ) -> Array:
     """``0.5 sum rho(r)^2``: what Levenberg-Marquardt minimises (``rho`` the robust loss)."""
     r = robust_residuals(residuals(f_model, prep), robust, scale)

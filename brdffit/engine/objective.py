@@ -35,6 +35,7 @@ from brdffit.core.parameters import Parameter, ParameterLayout, Params
 from brdffit.engine import metrics as metrics_mod
 from brdffit.engine.metrics import Prepared
 from brdffit.errors import ParameterError
+from brdffit.util.programs import program
 
 GRAM_CHUNK = 65_536
 """Residuals per chunk of :meth:`Objective.natural_block_moments`' Gram sums (65,536 x k^2
@@ -52,9 +53,9 @@ class Objective(eqx.Module):
 
     model: AbstractModel
     free: tuple[Parameter, ...] = eqx.field(static=True)
-    frozen: dict[str, Array]
+    frozen: dict[str, Array | np.ndarray]
     robust: str | None = eqx.field(static=True, default=None)
-    scale: Float[Array, "*p"] = eqx.field(default_factory=lambda: jnp.asarray(1.0))
+    scale: Float[Array | np.ndarray, "*p"] = eqx.field(default_factory=lambda: np.asarray(1.0))
 
     @classmethod
     def build(
@@ -68,8 +69,8 @@ class Objective(eqx.Module):
         if robust is not None and robust not in metrics_mod.ROBUST_TUNING:
             raise ParameterError(f"robust={robust!r}: use None, 'huber' or 'cauchy'")
         layout = ParameterLayout.build(model.parameters, freeze)
-        frozen = {k: jnp.asarray(v, jnp.float64) for k, v in layout.frozen.items()}
-        return cls(model, layout.free, frozen, robust, jnp.asarray(float(scale)))
+        frozen = {k: np.asarray(v, np.float64) for k, v in layout.frozen.items()}
+        return cls(model, layout.free, frozen, robust, np.asarray(float(scale)))
 
     @property
     def layout(self) -> ParameterLayout:
@@ -81,12 +82,13 @@ class Objective(eqx.Module):
         """Number of free scalars."""
         return self.layout.size
 
-    def with_robust(self, robust: str | None, scale: float | Array) -> Objective:
+    def with_robust(self, robust: str | None, scale: float | Array | np.ndarray) -> Objective:
         """The same objective under another robust loss and scale."""
-        scale = jnp.asarray(scale, jnp.float64)
+        # a traced or device scale stays as it is; a host one is not sent through JAX
+        scale = scale if isinstance(scale, jax.Array) else np.asarray(scale, np.float64)
         return Objective(self.model, self.free, self.frozen, robust, scale)
 
-    def params(self, z: Float[Array, " k"]) -> Params:
+    def params(self, z: Float[Array | np.ndarray, " k"]) -> Params:
         """Natural parameter dict (frozen values included) at the solver-space ``z``."""
         return self.layout.params(z, "solver")
 
@@ -197,37 +199,37 @@ def _residuals_and_jacobian(obj: Objective, z: Array, prep: Prepared) -> tuple[A
     return r, jac
 
 
-@eqx.filter_jit
+@program
 def cost(obj: Objective, z: Array, prep: Prepared) -> Array:
     """Jitted :meth:`Objective.cost`."""
     return obj.cost(z, prep)
 
 
-@eqx.filter_jit
+@program
 def plain_residuals(obj: Objective, z: Array, prep: Prepared) -> Array:
     """Jitted :meth:`Objective.residuals`."""
     return obj.residuals(z, prep)
 
 
-@eqx.filter_jit
+@program
 def natural_moments(obj: Objective, z: Array, prep: Prepared):
     """Jitted :meth:`Objective.natural_moments`."""
     return obj.natural_moments(z, prep)
 
 
-@eqx.filter_jit
+@program
 def block_moments(obj: Objective, z: Array, prep: Prepared, block: Array, n_blocks: int):
     """Jitted :meth:`Objective.block_moments` (``n_blocks`` static)."""
     return obj.block_moments(z, prep, block, n_blocks)
 
 
-@eqx.filter_jit
+@program
 def natural_block_moments(obj: Objective, z: Array, prep: Prepared, block: Array, n_blocks: int):
     """Jitted :meth:`Objective.natural_block_moments` (``n_blocks`` static)."""
     return obj.natural_block_moments(z, prep, block, n_blocks)
 
 
-@eqx.filter_jit
+@program
 def all_losses(model: AbstractModel, params: Params, preps: dict[str, Prepared]):
     """Every metric's loss at ``params``; the model is evaluated once (shared geometry)."""
     f = model.evaluate(params, next(iter(preps.values())).g)
@@ -235,8 +237,9 @@ def all_losses(model: AbstractModel, params: Params, preps: dict[str, Prepared])
 
 
 def start_params(model: AbstractModel, init: Mapping[str, object] | None) -> Params:
-    """The model's defaults with ``init`` (name -> natural value) checked and put in."""
-    params = model.defaults()
+    """The model's defaults with ``init`` (name -> natural value) checked and put in
+    (NumPy: the starts are made on the host)."""
+    params = {p.name: np.full(p.shape, p.default) for p in model.parameters}
     for name, value in (init or {}).items():
         params[name] = model.parameter(name).check_value(value)
     return params

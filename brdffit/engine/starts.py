@@ -24,7 +24,6 @@ cross-metric start's candidates are raced the same way under the other metric.
 
 from __future__ import annotations
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -35,6 +34,7 @@ from brdffit.core.abstract_model import linear_split
 from brdffit.core.parameters import ParameterLayout, Params
 from brdffit.engine.metrics import Prepared
 from brdffit.engine.objective import Objective
+from brdffit.util.programs import program
 
 SCREEN_KEEP = 8
 """Screened candidates kept as starts: the cheapest at the candidate is not always the
@@ -91,8 +91,8 @@ def _near(layout: ParameterLayout, base: Params, rng: np.random.Generator) -> Pa
     out = dict(base)
     for p in layout.free:
         if not p.linear:
-            u = np.asarray(p.to_unconstrained(jnp.asarray(base[p.name])))
-            out[p.name] = p.to_natural(jnp.asarray(u + rng.normal(0.0, 1.0, p.shape)))
+            u = p.to_unconstrained(np.asarray(base[p.name]))
+            out[p.name] = p.to_natural(u + rng.normal(0.0, 1.0, p.shape))
     return out
 
 
@@ -119,12 +119,12 @@ def _spread(
         t = 0.02 + 0.96 * qp
         lo, hi = p.bounds
         if p.saturates:
-            x = np.asarray(p.to_natural(jnp.asarray(np.log(t) - np.log1p(-t))))
+            x = p.to_natural(np.log(t) - np.log1p(-t))
         elif p.transform == "identity" and np.isfinite(lo) and np.isfinite(hi):
             x = lo + (hi - lo) * t
         else:
-            u = np.asarray(p.to_unconstrained(jnp.asarray(base[p.name])))
-            x = np.asarray(p.to_natural(jnp.asarray(u + 2.0 * ndtri(qp))))
+            u = p.to_unconstrained(np.asarray(base[p.name]))
+            x = p.to_natural(u + 2.0 * ndtri(qp))
         for c, row in zip(out, x, strict=True):
             c[p.name] = row
         i += p.size
@@ -168,13 +168,13 @@ def select(obj: Objective, near: jax.Array, spread: jax.Array, prep: Prepared) -
     return jnp.concatenate([out, zs[order]])
 
 
-@eqx.filter_jit
+@program
 def linear_start_one(obj: Objective, z: jax.Array, prep: Prepared) -> jax.Array:
     """:func:`linear_start` compiled for one problem."""
     return linear_start(obj, z, prep)
 
 
-@eqx.filter_jit
+@program
 def select_one(obj: Objective, near: jax.Array, spread: jax.Array, prep: Prepared) -> jax.Array:
     """:func:`select` compiled for one problem."""
     return select(obj, near, spread, prep)

@@ -38,9 +38,7 @@ import math
 import time
 from dataclasses import dataclass
 
-import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array
 
 from brdffit.core.parameters import ParameterLayout, Params
 from brdffit.core.result import FitResult, Status
@@ -163,7 +161,7 @@ def covariance(
 
 
 def _free_covariance(
-    obj: Objective, z: Array, prep: Prepared, padded: Prepared, act: np.ndarray, errors: str
+    obj: Objective, z: np.ndarray, prep: Prepared, padded: Prepared, act: np.ndarray, errors: str
 ) -> tuple[np.ndarray | None, float, str | None, np.ndarray, float, int]:
     """Covariance of the scalars not held on a bound (``act``) by ``errors`` (``padded``:
     ``prep`` padded, for the sums that padding leaves unchanged).
@@ -178,7 +176,7 @@ def _free_covariance(
         cov, cond, reason, weak = covariance(jtj[ix], meat[ix], float(ee), 3 * prep.n, errors)
         return cov, cond, reason, weak, float(rr), 0
     ids, n_blocks = block_index(prep)
-    moments = objective_mod.natural_block_moments(obj, z, prep, jnp.asarray(ids), n_blocks)
+    moments = objective_mod.natural_block_moments(obj, z, prep, np.asarray(ids), n_blocks)
     jtj, rr, scores, grams = (np.asarray(a) for a in moments)
     cond, reason, weak = conditioning(jtj[ix])
     cov = None
@@ -209,7 +207,7 @@ def assemble(
     layout, model = obj.layout, obj.model
     prep = preps[m.name]
     padded = prep.padded() if padded is None else padded
-    z = jnp.asarray(out.z)
+    z = np.asarray(out.z)
     params = {k: np.asarray(v) for k, v in obj.params(z).items()}
     cov = corr = stderr = None
     cond, reason, weak_names, rss = float("nan"), None, [], float("nan")
@@ -231,7 +229,7 @@ def assemble(
         sd = np.sqrt(np.clip(np.diag(cov), 0.0, None))
         with np.errstate(invalid="ignore"):
             corr = cov / np.outer(np.where(sd > 0, sd, 1), np.where(sd > 0, sd, 1))
-        stderr = {k: np.asarray(v) for k, v in layout.split(jnp.asarray(sd)).items()}
+        stderr = {k: np.asarray(v) for k, v in layout.split(sd).items()}
         stderr.update({k: np.zeros(np.shape(v)) for k, v in obj.frozen.items()})
         stderr = {p.name: stderr[p.name] for p in model.parameters}
         weak_names += [lab for lab in unidentified(layout, params, sd) if lab not in weak_names]
@@ -240,7 +238,9 @@ def assemble(
     finite = math.isfinite(rss)
     aic = n_data * math.log(rss / n_data) + 2 * k if finite else float("nan")
     bic = n_data * math.log(rss / n_data) + k * math.log(n_data) if finite else float("nan")
-    every = {k: padded if k == m.name else p.padded(padded) for k, p in preps.items()}
+    # padded here and let go (pad, not the kept ``padded``): kept, the other metrics'
+    # copies would be held through every later descent on these data
+    every = {k: padded if k == m.name else p.pad(padded.n, padded) for k, p in preps.items()}
     losses = {k: float(v) for k, v in objective_mod.all_losses(model, params, every).items()}
     at_bound = _at_bound(layout, params, out.binding)
     return FitResult(

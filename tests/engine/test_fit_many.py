@@ -1,4 +1,4 @@
-"""``fit_many``: one batched engine for many data sets, equal to one ``fit`` each."""
+"""``fit_many``: many data sets, each result equal to one ``fit`` of its data."""
 
 from __future__ import annotations
 
@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from brdffit import ParameterError, fit, fit_many, models, synthesize
+from brdffit.engine import fit as fit_mod
 
 GRID = (9, 9, 9)  # 2,000 MERL bin centres: small enough for several fits per test
 
@@ -26,7 +27,12 @@ def _materials(n: int) -> list:
 
 # the robust row (10 s) is slow; robust single fits are in the default suite (test_fit.py)
 @pytest.mark.parametrize("robust", [None, pytest.param("huber", marks=pytest.mark.slow)])
-def test_fit_many_equals_one_fit_per_material(robust):
+@pytest.mark.parametrize("path", ["concurrent", "batched"])
+def test_fit_many_equals_one_fit_per_material(robust, path, monkeypatch):
+    """Both ways of solving many problems: one per core in threads (the CPU's) and one
+    batched solve (an accelerator's, here on the CPU's ``lax.map``)."""
+    if path == "batched":
+        monkeypatch.setattr(fit_mod, "cores", lambda: 0)
     walter = models.get("walter")
     data = _materials(3)
     many = fit_many(walter, data, "low_e2", robust=robust)

@@ -1,0 +1,112 @@
+"""Programs exported ahead of time (:mod:`brdffit.util.programs`): the same answers as the
+function they wrap, and a fresh process that finds a stored fit neither traces nor
+exports it again, and fits to the same bits."""
+
+import json
+import os
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from brdffit.util import programs
+from brdffit.util.programs import Program
+
+
+class _Pair(eqx.Module):
+    a: jax.Array
+    b: jax.Array
+    tag: str = eqx.field(static=True)
+
+
+def _f(pair: _Pair, x: np.ndarray, power: int):
+    return {"sum": pair.a + x**power, "out": _Pair(pair.b * 2.0, jnp.sum(x), pair.tag)}
+
+
+def test_a_program_returns_what_its_function_returns_for_each_shape_and_static_value():
+    p = Program(_f)
+    pair = _Pair(jnp.arange(3.0), jnp.ones(2), "t")
+    for x, power in ((np.linspace(0, 1, 3), 2), (np.linspace(0, 1, 3), 3), (np.ones(3), 2)):
+        got, want = p(pair, x, power), _f(pair, x, power)
+        assert jax.tree.structure(got) == jax.tree.structure(want)
+        for g, w in zip(jax.tree.leaves(got), jax.tree.leaves(want), strict=True):
+            np.testing.assert_array_equal(np.asarray(g), np.asarray(w))
+    assert len(p._entries) == 2  # the shape and static value that repeat share a program
+
+
+def test_without_the_persistent_cache_nothing_is_stored():
+    assert jax.config.jax_compilation_cache_dir in (None, "")
+    assert programs.store_folder() is None
+
+
+_SCRIPT = textwrap.dedent(
+    """
+    import json, sys
+    import jax
+    import brdffit
+    from brdffit import fit, models, synthesize
+    from brdffit.util import programs
+
+    brdffit.enable_compilation_cache(sys.argv[1])
+    # XLA's own executable cache stays off: only the exported programs are under test
+    jax.config.update("jax_enable_compilation_cache", False)
+    exported, read = [], []
+    export = jax.export.export
+    def counting_export(*a, **k):
+        exported.append(1)
+        return export(*a, **k)
+    jax.export.export = counting_export
+    _read = programs._read
+    def counting_read(path):
+        out = _read(path)
+        read.append(out is not None)
+        return out
+    programs._read = counting_read
+    m = models.get("walter")
+    truth = {"kd": [0.2, 0.1, 0.05], "f0": [0.6, 0.5, 0.4], "alpha": 0.15, "ks": [1, 1, 1]}
+    data = synthesize(m, truth, stride=(9, 9, 9), noise_mult=0.03, seed=2)
+    r = fit(m, data, "low_e2")
+    print(json.dumps({
+        "exported": len(exported), "read": sum(read),
+        "loss": r.loss.hex(), "params": {k: v.tolist() for k, v in r.params.items()},
+        "stderr": {k: v.tolist() for k, v in r.stderr.items()},
+        "files": sorted(p.name.split("-")[0] for p in programs.store_folder().iterdir()),
+    }))
+    """
+)
+
+
+def _run(cache: Path) -> dict:
+    env = dict(os.environ, BRDFFIT_JAX_CACHE=str(cache))
+    out = subprocess.run(
+        [sys.executable, "-c", _SCRIPT, str(cache)],
+        capture_output=True, text=True, env=env, check=True, timeout=600,
+    )  # fmt: skip
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def test_a_fresh_process_fits_from_stored_programs_to_the_same_bits(tmp_path):
+    first = _run(tmp_path)
+    assert first["exported"] > 0 and first["read"] == 0
+    stored = set(first["files"])
+    fit_programs = {"shading_geometry", "select_one", "race", "natural_moments", "all_losses"}
+    assert fit_programs <= stored, stored
+
+    second = _run(tmp_path)
+    assert second["exported"] == 0, "a stored program was traced and exported again"
+    assert second["read"] == len(first["files"])
+    assert second["files"] == first["files"]
+    for key in ("loss", "params", "stderr"):
+        assert second[key] == first[key], key
+
+    # a damaged file is exported again, with the same answer
+    damaged = next(p for p in (tmp_path).rglob("race-*.pkl"))
+    damaged.write_bytes(b"not a program")
+    third = _run(tmp_path)
+    assert third["exported"] == 1
+    assert third["loss"] == first["loss"]
