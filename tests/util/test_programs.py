@@ -67,8 +67,10 @@ _SCRIPT = textwrap.dedent(
         read.append(out is not None)
         return out
     programs._read = counting_read
-    m = models.get("walter")
-    truth = {"kd": [0.2, 0.1, 0.05], "f0": [0.6, 0.5, 0.4], "alpha": 0.15, "ks": [1, 1, 1]}
+    # the smallest model with an affine and a nonlinear parameter runs every program of
+    # a fit (starts screened and raced, covariance, losses) and compiles quickest
+    m = models.get("oren_nayar")
+    truth = {"rho": [0.5, 0.3, 0.2], "sigma": 0.3}
     data = synthesize(m, truth, stride=(9, 9, 9), noise_mult=0.03, seed=2)
     r = fit(m, data, "low_e2")
     print(json.dumps({
