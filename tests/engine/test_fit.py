@@ -25,6 +25,7 @@ from brdffit.engine.batch import _subset, coarse_size
 from brdffit.engine.fit import require_measurements
 from brdffit.engine.metrics import get_metric, prepare, prepare_all
 from brdffit.engine.objective import Objective
+from brdffit.engine.settings import COARSE
 from tests.cases import CASES
 
 TRUTH = {"kd": [0.1, 0.2, 0.3], "ks": [0.8, 0.7, 0.9], "f0": [0.9, 0.6, 0.3], "alpha": 0.15}
@@ -288,6 +289,7 @@ def test_thinned_starts_keep_each_metrics_own_values():
         (7_288, 25_000, 2_000),  # the floor
         (20_234, 25_000, 5_058),  # a quarter
         (909_696, 25_000, 25_000),  # full MERL grid: the cap
+        (909_696, COARSE, 8_000),  # and the default's: a stride of 114 keeps every theta_h row
         (20_234, 1_000, 1_000),  # the caller's own cap wins
         (20_234, None, None),  # thinning off
     ],
