@@ -61,7 +61,8 @@ def _form_row(f) -> dict:
 def run_file(path: Path, stride, res: int, spp: int, png_dir: Path | None) -> dict:
     """Both targets' material runs and the Mitsuba render of one file, as a JSON-able dict."""
     import brdffit
-    from brdffit.export.material import Measured, best_material
+    from brdffit.export.material import best_material
+    from brdffit.export.render_score import Measured
 
     t0 = time.perf_counter()
     data = brdffit.read_rgl(path, stride=tuple(stride))

@@ -77,7 +77,7 @@ def test_the_scoring_directions_are_unit_and_the_sphere_sees_one_light():
     """Every direction the scores evaluate is a unit vector (the light was (3, 3, 4) / 5,
     of length 1.17, so every model saw cos_i 17% high and a wrong half vector), and on the
     point-light sphere the angle between light and viewer is the scene's in every pixel."""
-    from brdffit.export.material import LIGHT, _albedo_pairs, _sphere_pairs
+    from brdffit.export.render_score import LIGHT, _albedo_pairs, _sphere_pairs
 
     wi, wo, _ = _sphere_pairs()
     for v in (wi, wo, *_albedo_pairs()[:2]):
