@@ -41,6 +41,16 @@ ROWS: list[Case] = [
         {"rd": [0.2, 0.4, 0.6], "rs": [0.6, 0.5, 0.4], "nu": 30.0, "nv": 2000.0},
     ),
     Case(
+        "ashikhmin_shirley",
+        {"diffuse": "lambert"},
+        {"kd": [0.2, 0.1, 0.05], "ks": [0.7, 0.5, 0.3], "rs": [0.05, 0.1, 0.2], "n": 800.0},
+    ),
+    Case(
+        "ashikhmin_shirley",
+        {"diffuse": "lambert", "fresnel": "dielectric"},
+        {"kd": [0.1, 0.2, 0.3], "ks": [1.8, 1.2, 0.6], "eta": 2.7, "n": 40.0},
+    ),
+    Case(
         "kurt",
         params={
             "kd": [0.2, 0.1, 0.05],

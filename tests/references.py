@@ -371,6 +371,13 @@ def ashikhmin_shirley_ref(model, p, g):
     nu, nv = (p["nu"], p["nv"]) if model.anisotropic else (p["n"], p["n"])
     e = nu * mp.cos(g.ph) ** 2 + nv * mp.sin(g.ph) ** 2
     spec = mp.sqrt((nu + 1) * (nv + 1)) / (8 * mp.pi) * g.ch**e / (g.cd * max(g.ci, g.co))
+    if model.diffuse == "lambert":  # Ngan et al. 2005 / Löw et al. 2012: ks x lobe + kd / pi
+        if model.fresnel == "schlick":
+            fres = [schlick(rs, g.cd) for rs in rgb(p["rs"])]
+        else:
+            fres = rgb(fresnel_dielectric(g.cd, p["eta"]))
+        spec = [ks * f * spec for ks, f in zip(rgb(p["ks"]), fres, strict=True)]
+        return add(lambert(p["kd"]), spec)
     diff = 28 / (23 * mp.pi) * (1 - (1 - g.ci / 2) ** 5) * (1 - (1 - g.co / 2) ** 5)
     return [
         spec * schlick(rs, g.cd) + rd * (1 - rs) * diff

@@ -21,6 +21,16 @@ any finite exponent gives the right value). ``(n . h)^e`` is ``exp(e log cos_h)`
 ``1/((wi . h) max(cos_i, cos_o))`` grows to ~1e12 at grazing mirror pairs but stays finite.
 The diffuse factors ``1 - (1 - cos/2)^5 ~ 5 cos/2`` cancel at grazing angles when written as
 printed (relative error ~1e-16/cos: 1e-6 at cos 1e-10): they are ``-expm1(5 log1p(-cos/2))``.
+Option ``diffuse="lambert"`` is the form Ngan et al. 2005 and Löw et al. 2012 fitted to
+the MERL materials (their published fits): the specular lobe alone, scaled by an RGB
+``ks``, plus a Lambertian ``kd / pi`` instead of the coupled term,
+
+    f(wi, wo) = kd / pi + ks p_h(h) F(wi . h) / (4 (wi . h) max(cos_i, cos_o))
+
+with Schlick's ``F`` of a reflectance ``rs`` (Ngan) or, with ``fresnel="dielectric"``, the
+exact unpolarised Fresnel of a dielectric of index ``eta`` (Löw; ``F(1) = ((eta - 1)/(eta +
+1))^2``, so ``ks`` runs to 10). This variant is not energy conserving (``kd`` and ``ks``
+are independent), unlike the paper's coupled form; ``energy_conserving`` describes the latter.
 Reciprocal (``max`` and ``wi . h = wo . h`` are symmetric). Energy conserving, as the paper
 claims: checked by quadrature over ``Rs``, ``n`` and incidence with ``Rd = 1``
 (``tests/models/test_ashikhmin_shirley.py``); the largest albedo, 0.99996, is at ``Rs = 1``,
@@ -30,7 +40,7 @@ claims: checked by quadrature over ``Rs``, ``n`` and incidence with ``Rd = 1``
 
 from __future__ import annotations
 
-from typing import ClassVar, final
+from typing import ClassVar, Literal, final
 
 import equinox as eqx
 import jax
@@ -39,7 +49,15 @@ import jax.numpy as jnp
 from brdffit.core.abstract_model import AbstractModel
 from brdffit.core.geometry import ShadingGeometry
 from brdffit.core.parameters import Parameter, Params
-from brdffit.models._terms import DIELECTRIC_F0, INV_PI, log_cos_theta_h, schlick_fresnel
+from brdffit.models._terms import (
+    DIELECTRIC_ETA,
+    DIELECTRIC_F0,
+    INV_PI,
+    fresnel_dielectric,
+    lambert,
+    log_cos_theta_h,
+    schlick_fresnel,
+)
 
 RD = Parameter("rd", (3,), (0.0, 1.0), 0.3, "logit", "diffuse albedo Rd, RGB", linear=True)
 RS = Parameter(
@@ -49,6 +67,22 @@ RS = Parameter(
 N = Parameter("n", (), (0.1, 1e5), 100.0, "log", "Phong exponent, unitless")
 NU = Parameter("nu", (), (0.1, 1e5), 100.0, "log", "Phong exponent along the tangent x")
 NV = Parameter("nv", (), (0.1, 1e5), 100.0, "log", "Phong exponent along the bitangent y")
+# The Lambertian variant (Ngan et al. 2005, Löw et al. 2012): kd / pi plus the lobe scaled by ks.
+KD = Parameter("kd", (3,), (0.0, 1.0), 0.3, "logit", "Lambertian diffuse albedo, RGB", linear=True)
+KS = Parameter("ks", (3,), (0.0, 1.0), 0.5, "logit", "specular lobe scale, RGB", linear=True)
+# With an exact dielectric Fresnel, F(1) = ((eta - 1)/(eta + 1))^2 is small (0.04 at 1.5), so
+# the lobe's scale goes past 1 while its normal-incidence albedo ks F(1) stays small: Löw et
+# al.'s published fits reach ks = 1.82. The bound 10 is not physical (ks F(1) reaches 1 at
+# eta = 1.92); it leaves room for what the published fits use.
+KS_DIELECTRIC = Parameter(
+    "ks", (3,), (0.0, 10.0), 1.0, "logit", "specular lobe scale, RGB", linear=True
+)
+ETA = Parameter(
+    "eta", (), (1.01, 10.0), 1.5, "log", "relative index of refraction, unitless",
+    neutral=DIELECTRIC_ETA,
+)  # fmt: skip
+DIFFUSE = ("coupled", "lambert")
+FRESNEL = ("schlick", "dielectric")
 
 
 def exponent(h: jax.Array, nu: jax.Array, nv: jax.Array) -> jax.Array:
@@ -79,14 +113,32 @@ class AshikhminShirley(AbstractModel):
     """Anisotropic Phong lobe with Schlick Fresnel and the coupled (energy-sharing) diffuse."""
 
     anisotropic: bool = eqx.field(static=True, default=False)
+    diffuse: Literal["coupled", "lambert"] = eqx.field(static=True, default="coupled")
+    fresnel: Literal["schlick", "dielectric"] = eqx.field(static=True, default="schlick")
 
     name: ClassVar[str] = "ashikhmin_shirley"
     reference: ClassVar[str] = "Ashikhmin, Shirley 2000, J. Graphics Tools 5(2)"
-    energy_conserving: ClassVar[bool] = True
+    energy_conserving: ClassVar[bool] = True  # the paper's coupled form; see the module text
+
+    def __check_init__(self) -> None:
+        if self.diffuse not in DIFFUSE:
+            raise ValueError(f"ashikhmin_shirley: diffuse {self.diffuse!r} not one of {DIFFUSE}")
+        if self.fresnel not in FRESNEL:
+            raise ValueError(f"ashikhmin_shirley: fresnel {self.fresnel!r} not one of {FRESNEL}")
+        if self.fresnel == "dielectric" and self.diffuse == "coupled":
+            raise ValueError(
+                "ashikhmin_shirley: fresnel='dielectric' needs diffuse='lambert' (the coupled "
+                "diffuse term is written in the Schlick reflectance Rs)"
+            )
 
     @property
     def parameters(self) -> tuple[Parameter, ...]:
-        return (RD, RS) + ((NU, NV) if self.anisotropic else (N,))
+        lobe = (NU, NV) if self.anisotropic else (N,)
+        if self.diffuse == "coupled":
+            return (RD, RS) + lobe
+        if self.fresnel == "schlick":
+            return (KD, KS, RS) + lobe
+        return (KD, KS_DIELECTRIC, ETA) + lobe
 
     def lobe(self, params: Params, h: jax.Array) -> jax.Array:
         """The half-vector pdf ``p_h(h)`` for either exponent parametrisation, (N,)."""
@@ -96,7 +148,15 @@ class AshikhminShirley(AbstractModel):
         n = params["n"]
         return half_vector_pdf(h, n, n, n)
 
+    def fresnel_term(self, params: Params, cos_d: jax.Array) -> jax.Array:
+        """F at the facet incidence cosine ``wi . h``: (N, 3) Schlick, (N, 1) dielectric."""
+        if self.fresnel == "schlick":
+            return schlick_fresnel(params["rs"], cos_d)
+        return fresnel_dielectric(cos_d, params["eta"])[:, None]
+
     def core(self, params: Params, g: ShadingGeometry) -> jax.Array:
         denom = 4.0 * g.cos_d * jnp.maximum(g.cos_i, g.cos_o)
-        spec = schlick_fresnel(params["rs"], g.cos_d) * (self.lobe(params, g.h) / denom)[:, None]
-        return spec + coupled_diffuse(params["rd"], params["rs"], g)
+        spec = self.fresnel_term(params, g.cos_d) * (self.lobe(params, g.h) / denom)[:, None]
+        if self.diffuse == "coupled":
+            return spec + coupled_diffuse(params["rd"], params["rs"], g)
+        return params["ks"][None, :] * spec + lambert(params["kd"])

@@ -6,8 +6,9 @@ The factor ``(n + 8) / (8 pi)`` is the usual normalisation (Akenine-Möller, Hai
 and Hoffman, *Real-Time Rendering* 3rd ed., 2008, eq. 7.49) that keeps the
 specular lobe's directional albedo near ``ks`` for any exponent. It is an
 approximation: with ``kd + ks`` up to 2 under the independent bounds the sum can
-exceed 1, so the model is flagged as not energy conserving. Exponents reach 1e5 for
-near-mirror materials (the exponent is optimised in log space). Reciprocal, isotropic.
+exceed 1, so the model is flagged as not energy conserving. Exponents reach 1e6 for
+near-mirror materials (Ngan et al. 2005 publish up to 1.21e5 for MERL's phenolics; the
+exponent is optimised in log space). Reciprocal, isotropic.
 """
 
 from __future__ import annotations
@@ -24,7 +25,7 @@ from brdffit.models._terms import INV_PI, lambert
 PARAMETERS = (
     Parameter("kd", (3,), (0.0, 1.0), 0.3, "logit", "diffuse albedo, RGB", linear=True),
     Parameter("ks", (3,), (0.0, 1.0), 0.2, "logit", "specular albedo, RGB", linear=True),
-    Parameter("n", (), (1.0, 1e5), 50.0, "log", "Blinn exponent, unitless"),
+    Parameter("n", (), (1.0, 1e6), 50.0, "log", "Blinn exponent, unitless"),
 )
 
 

@@ -26,7 +26,9 @@ where ``f`` is large but finite); ``wo . h`` in ``G`` is floored at 1e-30
 (:func:`_terms.v_cavity_g`; ``G`` depends on no parameter, so only its value matters);
 D is evaluated in log space (:func:`_terms.beckmann_d`). Not energy conserving under
 the independent bounds (``kd + ks F`` can exceed 1; the specular term alone, with
-``ks <= 1`` and ``F <= 1``, keeps its albedo <= 1). Reciprocal (``wo . h = wi . h``),
+``ks <= 1`` and ``F <= 1``, keeps its albedo <= 1, except with ``fresnel="dielectric"``,
+whose ``ks`` runs to 10 so that Löw et al.'s published fits lie inside the bounds: there
+only ``ks F(1)`` is small). Reciprocal (``wo . h = wi . h``),
 isotropic.
 """
 
@@ -51,8 +53,14 @@ F0 = Parameter(
     "f0", (3,), (0.0, 1.0), 0.04, "logit", "Schlick reflectance at normal incidence",
     neutral=_terms.DIELECTRIC_F0,
 )  # fmt: skip
+# The exact dielectric Fresnel: F(1) = ((eta - 1)/(eta + 1))^2 is 0.04 at eta = 1.5, so the
+# lobe's weight goes past 1 while ks F(1), its normal-incidence share, stays small (Löw et
+# al. 2012 publish ks = 4 x 0.34 = 1.36 for MERL materials; 10 is room, not physics: ks F(1)
+# reaches 1 at eta = 1.92). eta reaches 10: Löw's fits of
+# metallic paints put it at 9.1-9.8, a dielectric stand-in for a conductor's high F(1).
+KS_D = Parameter("ks", (3,), (0.0, 10.0), 1.0, "logit", "specular weight s, RGB", linear=True)
 ETA_D = Parameter(
-    "eta", (), (1.01, 3.0), 1.5, "log", "relative index of refraction, unitless",
+    "eta", (), (1.01, 10.0), 1.5, "log", "relative index of refraction, unitless",
     neutral=_terms.DIELECTRIC_ETA,
 )  # fmt: skip
 ETA_C = Parameter("eta", (3,), (0.01, 6.0), 0.2, "log", "real part of the complex index, RGB")
@@ -80,7 +88,8 @@ class CookTorrance(AbstractModel):
     @property
     def parameters(self) -> tuple[Parameter, ...]:
         fresnel = {"schlick": (F0,), "dielectric": (ETA_D,), "conductor": (ETA_C, K_C)}
-        return ((KD,) if self.diffuse else ()) + (KS, M) + fresnel[self.fresnel]
+        ks = KS_D if self.fresnel == "dielectric" else KS
+        return ((KD,) if self.diffuse else ()) + (ks, M) + fresnel[self.fresnel]
 
     def fresnel_term(self, params: Params, cos_d: jax.Array) -> jax.Array:
         """F at the facet incidence cosine ``wo . h``, (N, 3) or (N, 1) for a scalar index."""
