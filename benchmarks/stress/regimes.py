@@ -230,6 +230,13 @@ ROLES: dict[str, Roles] = {
         narrow={"cxy_1": -1.0},
         two_lobes=({"n_lobes": 2}, params_of("lafortune", n_lobes=2)),
     ),
+    # He et al.: the lobe's slope is 2 sigma / tau and sigma / lambda decides between the
+    # series and its rough limit, so no one parameter is "the roughness" the lobe regimes
+    # set; the truth is a moderate lobe (slope 0.04; g = 1-2 at normal incidence, the series).
+    "he": Roles(
+        {"kd": [0.1, 0.2, 0.3], "ks": [0.5, 0.4, 0.3], "sigma": 0.05, "tau": 2.5, "eta": 1.5},
+        diffuse="kd",
+    ),
     "lambert": Roles({"kd": [0.2, 0.5, 0.8]}, diffuse="kd"),
     "low": Roles(
         {"kd": [0.1, 0.2, 0.3], "ks": [0.5, 0.4, 0.3], "B": 500.0, "C": 1.3, "eta": 1.6},
