@@ -24,12 +24,14 @@ present, so an interrupted run resumes. The markdown table is printed (``--md`` 
 Run (nice: the box is shared):
     nice python -m benchmarks.published_record [--families ngan_ward ...]
         [--materials alum-bronze ...] [--stride 3 3 5] [--jobs 2]
-        [--out /tmp/brdffit_published/s335] [--md benchmarks/results/published_record.md]
+        [--out /tmp/brdffit_published/s335] [--full-grid [MATERIAL ...]]
+        [--md table.md] [--csv benchmarks/results/published_record.csv]
 """
 
 from __future__ import annotations
 
 import argparse
+import csv
 import json
 import os
 import pickle
@@ -254,6 +256,32 @@ def table(out: Path, keys: list[str]) -> str:
     return "\n".join(lines + ([""] + details if details else [])) + "\n"
 
 
+def write_csv(out: Path, keys: list[str], path: Path) -> int:
+    """One line per stored comparison (sub-grid and, where rescored, full-grid scores under
+    the set's metric); the number of lines."""
+    lines = []
+    for key in keys:
+        for p in sorted((out / key).glob("*.json")):
+            r = json.loads(p.read_text())
+            m = r["metric"]
+            full = _path(out / "full", key, r["material"])
+            f = json.loads(full.read_text()) if full.exists() else None
+            lines.append({
+                "fit_set": key, "material": r["material"], "metric": m, "model": r["spec"],
+                "status": r["status"], "steps": r["steps"], "seconds": f"{r['seconds']:.2f}",
+                "ours": f"{r['ours'][m]:.9g}", "published": f"{r['published'][m]:.9g}",
+                "mapped": f"{r['mapped'][m]:.9g}" if r.get("mapped") else "",
+                "full_grid_ours": f"{f['ours'][m]:.9g}" if f else "",
+                "full_grid_published": f"{f['published'][m]:.9g}" if f else "",
+                "published_outside_bounds": "+".join(r.get("outside_bounds") or []),
+            })  # fmt: skip
+    with open(path, "w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=list(lines[0]))
+        w.writeheader()
+        w.writerows(lines)
+    return len(lines)
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--families", nargs="+", default=list(FAMILIES), choices=list(FAMILIES))
@@ -262,6 +290,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--jobs", type=int, default=1)
     ap.add_argument("--out", type=Path, default=None)
     ap.add_argument("--md", type=Path, default=None)
+    ap.add_argument("--csv", type=Path, default=None, help="write one line per comparison")
     ap.add_argument(
         "--full-grid",
         nargs="*",
@@ -296,6 +325,8 @@ def main(argv: list[str] | None = None) -> int:
     print(md)
     if a.md:
         a.md.write_text(md)
+    if a.csv:
+        write_csv(out, a.families, a.csv)
     return 0
 
 
