@@ -2,8 +2,8 @@
 
 For each fit set (:mod:`benchmarks.published.families`) and each of its materials
 (Ngan et al.: 86, Löw et al. and Bagher et al.: 100), on the NBRDF network of the
-material (``$BRDFFIT_NBRDF``, default ``/work/shared/data/merl_nbrdf``) evaluated on a
-strided MERL grid:
+material (``$BRDFFIT_NBRDF``, default ``../shared/data/merl_nbrdf`` beside the repository)
+evaluated on a strided MERL grid:
 
 1. brdffit fits the model with that fit set's formula, with its defaults, under the
    metric the set was published with;
@@ -51,7 +51,9 @@ from brdffit import fit, models
 from brdffit.io.load import load_measurements
 from brdffit.util.atomic import write_atomic
 
-NBRDF = Path(os.environ.get("BRDFFIT_NBRDF", "/work/shared/data/merl_nbrdf"))
+NBRDF = Path(
+    os.environ.get("BRDFFIT_NBRDF", Path(__file__).resolve().parents[2] / "shared/data/merl_nbrdf")
+)
 CACHE = Path(tempfile.gettempdir()) / "brdffit_published"
 TIE = 1e-6
 """Relative margin within which two scores count as equal: the published parameters are
