@@ -87,12 +87,12 @@ def _outside(model, params: dict) -> list[str]:
 
 
 def _clipped(model, params: dict) -> dict:
+    """``params`` moved inside the bounds (by 1e-6 of the range), as ``fit``'s ``init`` must be."""
     out = {}
     for p in model.parameters:
         lo, hi = p.bounds
         span = hi - lo if np.isfinite(hi - lo) else 1.0
-        v = np.clip(np.asarray(params[p.name], float), lo + 1e-6 * span, hi - 1e-6 * span)
-        out[p.name] = v if p.shape else np.float64(np.mean(v))
+        out[p.name] = np.clip(np.asarray(params[p.name], float), lo + 1e-6 * span, hi - 1e-6 * span)
     return out
 
 
@@ -255,7 +255,8 @@ def table(out: Path, keys: list[str]) -> str:
                     f"- {key}, {r['material']}: ours {r['ours'][m]:.5g}, published "
                     f"{r['published'][m]:.5g} ({r['ours'][m] / r['published'][m]:.3f}x): {why}"
                 )
-    return "\n".join(lines + ([""] + details if details else [])) + "\n"
+    notes = [f"- {k}: {FAMILIES[k].note}" for k in keys if FAMILIES[k].note]
+    return "\n".join(lines + [""] + notes + ([""] + details if details else [])) + "\n"
 
 
 def write_csv(out: Path, keys: list[str], path: Path) -> int:

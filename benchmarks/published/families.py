@@ -61,13 +61,12 @@ class Family:
 
     ``to_published(params)`` the bbm string of a brdffit fit (None: the formulas differ,
     no exact map); ``from_published(fit)`` the published fit in brdffit's parameters
-    (None: no map). ``note`` says what differs, if anything."""
+    (None: no map). ``note`` says what differs, if anything (printed under the table)."""
 
     key: str
     file: str
     metric: str
     spec: str
-    cls: str
     to_published: Callable[[Params], str] | None
     from_published: Callable[[PublishedFit], Params] | None
     note: str = ""
@@ -314,74 +313,71 @@ def _bagher_back(fit: PublishedFit) -> Params:
     }
 
 
-def _family(key, file, metric, spec, cls, maps, note="") -> Family:
-    to, back = maps if maps is not None else (None, None)
-    return Family(key, file, metric, spec, cls, to, back, note)
+def _family(key, file, metric, spec, maps) -> Family:
+    return Family(key, file, metric, spec, *maps)
 
+
+_SGD_NOTE = (
+    "G1: the paper's empirical curve (4 more parameters per channel) against brdffit's "
+    "exact Smith masking"
+)
+_BLINN_NOTE = "scored as Blinn's half-vector lobe, not bbm's Phong alias"
+_LAFORTUNE_NOTE = "scored by bbm's formula in log space: bbm's C++ returns NaN for 33 of the 86"
+_AS_LOW = "ashikhmin_shirley[diffuse=lambert,fresnel=dielectric]"
 
 FAMILIES: dict[str, Family] = {
     f.key: f
     for f in (
-        _family(
-            "ngan_ward", "ngan_ward.fit", "ngan", "ward", "NganWard", _ward("NganWard")
-        ),
+        _family("ngan_ward", "ngan_ward.fit", "ngan", "ward", _ward("NganWard")),
         _family(
             "ngan_wardduer", "ngan_wardduer.fit", "ngan", "ward[normalization=duer]",
-            "NganWardDuer", _ward("NganWardDuer"),
+            _ward("NganWardDuer"),
         ),
         Family(
-            "ngan_blinnphong", "ngan_blinnphong.fit", "ngan", "blinn_phong", "NganBlinnPhong",
-            _blinn_to, _blinn_back, "scored as Blinn's half-vector lobe, not bbm's Phong alias",
-            blinn_reading,
+            "ngan_blinnphong", "ngan_blinnphong.fit", "ngan", "blinn_phong",
+            _blinn_to, _blinn_back, _BLINN_NOTE, blinn_reading,
         ),
         Family(
-            "ngan_lafortune", "ngan_lafortune.fit", "ngan", "lafortune", "NganLafortune",
-            _lafortune_to, _lafortune_back, "scored by bbm's formula in log space: bbm's C++ "
-            "returns NaN for 33 of the 86 fits", lafortune_reading,
+            "ngan_lafortune", "ngan_lafortune.fit", "ngan", "lafortune",
+            _lafortune_to, _lafortune_back, _LAFORTUNE_NOTE, lafortune_reading,
         ),
         _family(
-            "ngan_cooktorrance", "ngan_cooktorrance.fit", "ngan",
-            "cook_torrance[grey=f0]", "NganCookTorrance",
+            "ngan_cooktorrance", "ngan_cooktorrance.fit", "ngan", "cook_torrance[grey=f0]",
             _ct("NganCookTorrance", 4.0 / math.pi, "schlick"),
         ),
         _family(
             "ngan_ashikhminshirley", "ngan_ashikhminshirley.fit", "ngan",
-            "ashikhmin_shirley[diffuse=lambert,grey=rs]", "NganAshikhminShirley",
+            "ashikhmin_shirley[diffuse=lambert,grey=rs]",
             _as("NganAshikhminShirley", "schlick"),
         ),
-        _family("ngan_he", "ngan_he.fit", "ngan", "he", "NganHe", (_he_to, _he_back)),
+        _family("ngan_he", "ngan_he.fit", "ngan", "he", (_he_to, _he_back)),
         _family(
             "low_cooktorrance_E1", "low_cooktorrance_E1.fit", "low_e1",
-            "cook_torrance[fresnel=dielectric]", "LowCookTorrance",
-            _ct("LowCookTorrance", 4.0, "dielectric"),
+            "cook_torrance[fresnel=dielectric]", _ct("LowCookTorrance", 4.0, "dielectric"),
         ),
         _family(
             "low_cooktorrance_E2", "low_cooktorrance_E2.fit", "low_e2",
-            "cook_torrance[fresnel=dielectric]", "LowCookTorrance",
-            _ct("LowCookTorrance", 4.0, "dielectric"),
+            "cook_torrance[fresnel=dielectric]", _ct("LowCookTorrance", 4.0, "dielectric"),
         ),
         _family(
-            "low_ashikhminshirley_E1", "low_ashikhminshirley_E1.fit", "low_e1",
-            "ashikhmin_shirley[diffuse=lambert,fresnel=dielectric]", "LowAshikhminShirley",
+            "low_ashikhminshirley_E1", "low_ashikhminshirley_E1.fit", "low_e1", _AS_LOW,
             _as("LowAshikhminShirley", "dielectric"),
         ),
         _family(
-            "low_ashikhminshirley_E2", "low_ashikhminshirley_E2.fit", "low_e2",
-            "ashikhmin_shirley[diffuse=lambert,fresnel=dielectric]", "LowAshikhminShirley",
+            "low_ashikhminshirley_E2", "low_ashikhminshirley_E2.fit", "low_e2", _AS_LOW,
             _as("LowAshikhminShirley", "dielectric"),
         ),
         _family(
             "low_lowmicrofacet_E2", "low_lowmicrofacet_E2.fit", "low_e2", "low",
-            "LowMicrofacetFit", _low("LowMicrofacetFit", "abc"),
+            _low("LowMicrofacetFit", "abc"),
         ),
         _family(
             "low_lowsmooth_E2", "low_lowsmooth_E2.fit", "low_e2", "low[variant=smooth]",
-            "LowSmooth", _low("LowSmooth", "smooth"),
+            _low("LowSmooth", "smooth"),
         ),
         Family(
-            "bagher_sgd", "bagher_sgd.fit", "ngan", "sgd[rgb_lobe=true]", "Bagher", None,
-            _bagher_back, "G1: the paper's empirical curve (4 more parameters per channel) "
-            "against brdffit's exact Smith masking",
+            "bagher_sgd", "bagher_sgd.fit", "ngan", "sgd[rgb_lobe=true]", None, _bagher_back,
+            _SGD_NOTE,
         ),
     )
 }  # fmt: skip
