@@ -150,10 +150,10 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--robust-scale", type=float, help="its scale, residual units (default: MAD)")
     s.add_argument(
         "--errors",
-        default="sandwich",
-        choices=["sandwich", "classic", "blocks"],
-        help="standard errors; blocks: for measured data, admits model error shared by "
-        "neighbouring cells",
+        default="auto",
+        choices=["auto", "sandwich", "classic", "blocks"],
+        help="standard errors; blocks: admits model error shared by neighbouring cells; "
+        "auto (default): blocks for measured data, sandwich for synthetic",
     )
     s.add_argument("--json", metavar="OUT", help="write the result as JSON")
     s.add_argument("--report", metavar="HTML", help="write a one-file HTML report with figures")

@@ -130,6 +130,10 @@ class Measurements:
       evaluated: "outside the cut", not "not measured"), or ``None``.
     - ``stride``: the MERL sub-grid stride when the samples are a strided MERL grid in
       order (:func:`brdffit.io.merl_grid.merl_grid`), else ``None``.
+    - ``synthetic``: True when the values are a model's own (:func:`brdffit.synthetic`),
+      so a fit of that model has no model error; decides the default standard errors
+      (``errors="auto"``, :mod:`brdffit.engine.uncertainty`). False for everything read
+      or built from arrays.
     """
 
     wi: np.ndarray
@@ -146,6 +150,7 @@ class Measurements:
     channel_valid: np.ndarray | None = None
     zenith_cut_deg: float | None = None
     stride: tuple[int, int, int] | None = None
+    synthetic: bool = False
 
     def __post_init__(self) -> None:
         n = np.shape(self.wi)[0] if np.ndim(self.wi) == 2 else -1

@@ -68,7 +68,11 @@ class FitResult:
     metric for the extra start included;
     ``n_steps`` counts the winner's steps on all samples), ``robust`` /
     ``robust_scale`` (the robust loss and its scale in residual units, or None),
-    ``error_blocks`` (the blocks of ``errors="blocks"``, else 0).
+    ``error_blocks`` (the blocks of ``errors="blocks"``, else 0), ``error_dof`` (name ->
+    array: each free scalar's effective degrees of freedom under ``errors="blocks"``,
+    whose ``stderr`` is widened so that ``value +/- 1.96 stderr`` is the Student-t 95%
+    interval of these degrees; NaN for scalars without an error; None for the other
+    kinds, :mod:`brdffit.engine.uncertainty`).
     """
 
     model: str
@@ -106,6 +110,7 @@ class FitResult:
     robust: str | None = None
     robust_scale: float | None = None
     error_blocks: int = 0
+    error_dof: dict[str, np.ndarray] | None = None
 
     @property
     def converged(self) -> bool:
@@ -166,6 +171,9 @@ class FitResult:
             "robust": self.robust,
             "robust_scale": self.robust_scale,
             "error_blocks": self.error_blocks,
+            "error_dof": None
+            if self.error_dof is None
+            else {k: _floats(v) for k, v in self.error_dof.items()},
         }
 
     def to_json(self, indent: int | None = 2) -> str:
@@ -218,6 +226,7 @@ class FitResult:
             robust=d.get("robust"),
             robust_scale=d.get("robust_scale"),
             error_blocks=int(d.get("error_blocks", 0)),
+            error_dof=arrays(d.get("error_dof")),
         )
 
     def report(self, correl_min: float = 0.3) -> str:

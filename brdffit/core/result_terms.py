@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 AT_BOUND_RTOL = 1e-6
 """A free scalar within this relative distance of a bound is flagged ``at bound``."""
 
@@ -22,19 +24,25 @@ SUMMED_METRICS = ("low_e1", "low_e2")
 
 
 #: The side, in degrees of (theta_h, theta_d), of the blocks that ``errors="blocks"``
-#: treats as independent (:func:`brdffit.engine.uncertainty.block_covariance`).
+#: treats as independent (:mod:`brdffit.engine.block_errors`).
 BLOCK_DEG = 10.0
 
 
-def errors_assumed(method: str, n_blocks: int = 0) -> str:
+def errors_assumed(method: str, n_blocks: int = 0, dof: dict | None = None) -> str:
     """What the standard errors of ``method`` (``sandwich``, ``classic``, ``blocks``) assume,
-    in the words reports print beside them."""
+    in the words reports print beside them (``dof``: :attr:`FitResult.error_dof
+    <brdffit.core.result.FitResult.error_dof>`, its range is printed)."""
     if method == "classic":
         return "residuals independent, one variance; errors by classic (s^2 (J^T J)^-1)"
     if method == "blocks":
+        nu = np.concatenate([np.ravel(v) for v in (dof or {}).values()] or [np.empty(0)])
+        nu = nu[np.isfinite(nu)]
+        t = f", {nu.min():.3g} to {nu.max():.3g} degrees of freedom" if nu.size else ""
         return (
-            f"residuals correlated within {BLOCK_DEG:g}-degree (theta_h, theta_d) blocks, "
-            f"independent between them; errors by block jackknife over {n_blocks} blocks"
+            f"model error: residuals correlated within {BLOCK_DEG:g}-degree (theta_h, theta_d) "
+            f"blocks, independent between them; errors by cluster sandwich (CR2) over "
+            f"{n_blocks} blocks, widened so that +/- 1.96 stderr is the Student-t 95% "
+            f"interval{t}"
         )
     return "residuals independent, any variance; errors by sandwich"
 

@@ -115,7 +115,7 @@ def statistics(r: FitResult) -> list[tuple[str, str]]:
     return [
         ("metric", f"{r.metric} = {loss_text(r.metric, r.loss, r.n_samples)}   ({cut})"),
         ("other metrics", others),
-        ("noise model", errors_assumed(r.errors_method, r.error_blocks) + robust),
+        ("noise model", errors_assumed(r.errors_method, r.error_blocks, r.error_dof) + robust),
         ("status", r.status.value),
         ("steps", f"{r.n_steps} (best of {r.n_starts} starts{coarse})"),
         ("wall time", f"{r.wall_time:.3f} s"),

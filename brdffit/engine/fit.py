@@ -53,7 +53,7 @@ def fit(
     ftol: float = 1e-10,
     xtol: float = 1e-10,
     gtol: float = 1e-10,
-    errors: str = "sandwich",
+    errors: str = "auto",
     robust: str | None = None,
     robust_scale: float | None = None,
     coarse: int | None = COARSE,
@@ -74,8 +74,11 @@ def fit(
       few become starts. 0 turns the screen off.
     - ``max_steps``: tried LM steps per descent. ``ftol``, ``xtol``, ``gtol``: relative
       stopping tolerances (:mod:`brdffit.engine.lm`).
-    - ``errors``: ``"sandwich"``, ``"classic"`` or ``"blocks"`` (model error shared by
-      neighbouring cells, for measured data; :mod:`brdffit.engine.uncertainty`).
+    - ``errors``: ``"auto"`` (default: ``"blocks"`` for measured data, ``"sandwich"`` for
+      :attr:`~brdffit.core.measurements.Measurements.synthetic` data), ``"sandwich"``
+      (independent residuals), ``"classic"`` (independent, one variance) or ``"blocks"``
+      (model error shared by neighbouring cells, as in measured data; 95% intervals from
+      Student's t); :mod:`brdffit.engine.uncertainty`.
     - ``robust``: ``None``, ``"huber"`` or ``"cauchy"``: a robust loss on the metric's
       residuals against outliers; ``robust_scale`` (residual units) defaults to the
       tuning constant (1.345 Huber, 2.385 Cauchy) times 1.4826 MAD of the plain
@@ -168,6 +171,7 @@ class _Batch:
                 assemble(
                     obj, self.m, o, self.per[i], padded=q, errors=self.s.errors,
                     cut=self.s.cut_deg, source=self.datasets[i].source, t0=self.t0,
+                    synthetic=self.datasets[i].synthetic,
                 )
             )  # fmt: skip
         return out

@@ -11,7 +11,7 @@ import numpy as np
 
 from brdffit.engine import lm
 from brdffit.engine import metrics as metrics_mod
-from brdffit.engine.uncertainty import ERRORS
+from brdffit.engine.uncertainty import CHOICES
 from brdffit.errors import ParameterError
 
 Freeze = Mapping[str, object] | Sequence[str] | None
@@ -44,15 +44,15 @@ class Settings:
     ftol: float = lm.Tolerances.ftol
     xtol: float = lm.Tolerances.xtol
     gtol: float = lm.Tolerances.gtol
-    errors: str = "sandwich"
+    errors: str = "auto"
     robust: str | None = None
     robust_scale: float | None = None
     coarse: int | None = COARSE
     throw: bool = True
 
     def __post_init__(self) -> None:
-        if self.errors not in ERRORS:
-            raise ParameterError(f"errors={self.errors!r}: use one of {', '.join(ERRORS)}")
+        if self.errors not in CHOICES:
+            raise ParameterError(f"errors={self.errors!r}: use one of {', '.join(CHOICES)}")
         if self.robust is not None and self.robust not in metrics_mod.ROBUST_TUNING:
             raise ParameterError(f"robust={self.robust!r}: use None, 'huber' or 'cauchy'")
         rs = self.robust_scale

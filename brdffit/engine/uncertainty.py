@@ -8,23 +8,39 @@ assume independent residuals: neighbouring cells of measured data share model er
 so on measured data they are a lower bound (see DESIGN.md). ``errors="blocks"`` admits
 that error: residuals are grouped in blocks of :data:`BLOCK_DEG` x :data:`BLOCK_DEG`
 degrees in (theta_h, theta_d), correlated any way within a block and independent
-between blocks, and the covariance is the cluster jackknife (CR3; MacKinnon and White
-1985, Bell and McCaffrey 2002, MacKinnon, Nielsen and Webb 2023) in its one-step form:
-with ``A = J^T J``, ``A_b = J_b^T J_b`` and ``s_b = J_b^T e_b`` the Gram matrix and score
-of block ``b``, leaving block ``b`` out moves the estimate by ``d_b = (A - A_b)^-1 s_b``,
-and ``cov = (G-1)/G sum_b d_b d_b^T`` over the ``G`` blocks (exact for a model linear
-in its parameters: ``tests/engine/test_block_errors.py`` checks it against real refits).
-Unlike the plain cluster sandwich (``A^-1 [sum s_b s_b^T] A^-1``, Liang and Zeger 1986,
-CR1) it does not shrink the blocks that carry most of the information (the specular
-peak, the grazing rise), whose own residuals the fit has pulled towards zero. Which
-correction, by measurement (``benchmarks/split_halves.py``: walter fitted to two
-disjoint checkerboard halves of 24 NBRDF materials; the share of scalars whose two
-estimates agree within their stated 95%): CR1 58.5%, CR2 (half the leverage
-correction, :func:`block_covariance` with ``power=0.5``) 86.6%, CR3 100% (median
-``|z|`` 0.28 where 0.67 would be exact). CR3 is the only one not overconfident there,
-so it is the default of ``"blocks"``; its intervals are wider than needed on these
-halves. It needs many blocks (it counts them, :func:`brdffit.core.result_terms.errors_assumed`)
-and none that alone identifies a parameter.
+between blocks. Its covariance is the bias-reduced cluster sandwich (CR2; Bell and
+McCaffrey 2002): with ``A = J^T J``, ``A_b = J_b^T J_b`` and ``s_b = J_b^T e_b`` the Gram
+matrix and score of block ``b``, each score is divided by the square root of its
+block's leverage, ``u_b = A^-1/2 (I - A^-1/2 A_b A^-1/2)^-1/2 A^-1/2 s_b``, and
+``cov = sum_b u_b u_b^T``. The plain cluster sandwich (``A^-1 [sum s_b s_b^T] A^-1``, Liang
+and Zeger 1986, CR1) shrinks the blocks that carry most of the information (the
+specular peak, the grazing rise), whose own residuals the fit has pulled towards zero;
+CR2 undoes that shrinkage exactly for a linear model with independent errors.
+
+A few blocks carry the specular parameters, so their variance is estimated from a few
+numbers and the normal quantile 1.96 is too small. Each scalar's effective degrees of
+freedom ``nu`` are Bell and McCaffrey's Satterthwaite approximation
+(:func:`effective_dof`, as Imbens and Kolesar 2016 and Pustejovsky and Tipton 2018
+recommend for few or unequal clusters), and the 95% interval is ``t_0.975(nu)`` CR2
+errors wide: the reported standard error is the CR2 error times ``t_0.975(nu) / 1.96``
+(:func:`coverage_factor`, the coverage factor of the GUM's expanded uncertainty), so
+that ``value +/- 1.96 stderr`` is that interval everywhere brdffit draws one, and
+``nu`` is kept in :attr:`~brdffit.core.result.FitResult.error_dof`.
+
+Which estimator, by measurement (``benchmarks/split_halves.py``: walter fitted to two
+disjoint checkerboard halves of 100 NBRDF materials and 28 RGL-EPFL files, 1,103
+scalars; the factor by which the stated 95% intervals would have to be scaled to hold
+95% of the half differences, 1 if calibrated; ``benchmarks/results/split_halves.md``):
+sandwich 19.5, CR1 3.28, CR2 with normal quantiles 1.83, CR3 (the previous default)
+0.66, CR2 with the t widening 0.83 (NBRDF 0.84, RGL 0.78). The last is the default:
+within 1.25x of calibrated pooled, on the conservative side. It needs many blocks (it counts them,
+:func:`brdffit.core.result_terms.errors_assumed`) and none that alone identifies a
+parameter.
+
+``errors="auto"`` (the default of :func:`brdffit.fit`) is ``"blocks"`` for measured data
+and ``"sandwich"`` for synthetic data (:attr:`~brdffit.core.measurements.Measurements.synthetic`:
+a model's own values plus independent noise have no model error to admit), and
+``"sandwich"`` where the data have too few blocks for ``"blocks"`` (the result says so).
 
 Only k x k matrices (``J^T J`` and ``J^T diag(r^2) J``, formed on the device by
 :meth:`brdffit.engine.objective.Objective.natural_moments`; for ``"blocks"``, ``J^T J`` and
@@ -42,8 +58,14 @@ import numpy as np
 
 from brdffit.core.parameters import ParameterLayout, Params
 from brdffit.core.result import FitResult, Status
-from brdffit.core.result_terms import AT_BOUND_ATOL, AT_BOUND_RTOL, BLOCK_DEG
+from brdffit.core.result_terms import AT_BOUND_ATOL, AT_BOUND_RTOL
 from brdffit.engine import objective as objective_mod
+from brdffit.engine.block_errors import (
+    block_covariance,
+    block_index,
+    coverage_factor,
+    effective_dof,
+)
 from brdffit.engine.metrics import Metric, Prepared
 from brdffit.engine.objective import Objective
 
@@ -60,30 +82,11 @@ working precision (float64 resolves 1 in 4.5e15)."""
 ERRORS = ("sandwich", "classic", "blocks")
 """The kinds of standard errors :func:`brdffit.fit` reports (module docstring)."""
 
-"""Side of the (theta_h, theta_d) blocks of ``errors="blocks"``, degrees. Model error is
-a smooth function of (theta_h, theta_d): the residuals of a fit to measured data change
-sign over a few degrees (specular peak, Fresnel rise), so a 10-degree block holds a
-stretch of correlated error while the 80-degree cut keeps 50-70 occupied blocks, enough
-for the cluster sum (Cameron and Miller 2015 advise some 50)."""
+CHOICES = ("auto", *ERRORS)
+"""What ``errors=`` accepts: a kind of :data:`ERRORS`, or ``"auto"`` (module docstring)."""
 
-MIN_BLOCKS = 20
-"""Fewer occupied blocks than this and ``errors="blocks"`` gives no errors (the cluster
-sum of ``G`` scores has rank ``< G`` and is unreliable for small ``G``)."""
-
-
-def block_cells(prep: Prepared, block_deg: float = BLOCK_DEG) -> tuple[np.ndarray, np.ndarray]:
-    """Each sample's block coordinates ``(floor(theta_h / deg), floor(theta_d / deg))``."""
-    th = np.degrees(np.arccos(np.clip(np.asarray(prep.g.cos_h), -1.0, 1.0)))
-    td = np.degrees(np.arccos(np.clip(np.asarray(prep.g.cos_d), -1.0, 1.0)))
-    return np.floor(th / block_deg).astype(int), np.floor(td / block_deg).astype(int)
-
-
-def block_index(prep: Prepared, block_deg: float = BLOCK_DEG) -> tuple[np.ndarray, int]:
-    """Each sample's (theta_h, theta_d) block, numbered 0..G-1 over occupied blocks; G."""
-    i, j = block_cells(prep, block_deg)
-    per_row = int(np.ceil(90.0 / block_deg)) + 1
-    occupied, ids = np.unique(i * per_row + j, return_inverse=True)
-    return ids.astype(np.int32), int(occupied.size)
+LEVEL = 0.95
+"""The interval the ``"blocks"`` errors are widened for (:func:`coverage_factor`)."""
 
 
 @dataclass(frozen=True)
@@ -160,29 +163,63 @@ def covariance(
     return 0.5 * (cov + cov.T), cond, None, weak
 
 
-def _free_covariance(
-    obj: Objective, z: np.ndarray, prep: Prepared, padded: Prepared, act: np.ndarray, errors: str
-) -> tuple[np.ndarray | None, float, str | None, np.ndarray, float, int]:
-    """Covariance of the scalars not held on a bound (``act``) by ``errors`` (``padded``:
-    ``prep`` padded, for the sums that padding leaves unchanged).
+@dataclass(frozen=True)
+class _Errors:
+    """The free scalars' covariance and what came with it (:func:`_free_covariance`).
 
-    Returns (cov, condition, reason, weak) as :func:`covariance`, then the plain
-    residuals' ``r.r`` and the number of blocks (0 unless ``errors="blocks"``).
+    ``cov`` None with ``reason``; ``cond`` and ``weak`` from :func:`conditioning`; ``rr``
+    the plain residuals' ``r.r``; ``method`` the kind used (``"auto"`` resolved);
+    ``n_blocks`` and ``dof`` (per free scalar) for ``"blocks"``, else 0 and None;
+    ``fallback`` why ``"auto"`` fell back to ``"sandwich"``, or None.
     """
+
+    cov: np.ndarray | None
+    cond: float
+    reason: str | None
+    weak: np.ndarray
+    rr: float
+    method: str
+    n_blocks: int = 0
+    dof: np.ndarray | None = None
+    fallback: str | None = None
+
+
+def _free_covariance(
+    obj: Objective,
+    z: np.ndarray,
+    prep: Prepared,
+    padded: Prepared,
+    act: np.ndarray,
+    errors: str,
+    synthetic: bool,
+) -> _Errors:
+    """Covariance of the scalars not held on a bound (``act``) by ``errors`` (``padded``:
+    ``prep`` padded, for the sums that padding leaves unchanged; ``synthetic``: the data
+    are a model's values, for ``"auto"``, module docstring)."""
     ix = np.ix_(act, act)
-    if errors != "blocks":
-        moments = objective_mod.natural_moments(obj, z, padded)
-        jtj, meat, ee, rr = (np.asarray(a) for a in moments)
-        cov, cond, reason, weak = covariance(jtj[ix], meat[ix], float(ee), 3 * prep.n, errors)
-        return cov, cond, reason, weak, float(rr), 0
-    ids, n_blocks = block_index(prep)
-    moments = objective_mod.natural_block_moments(obj, z, prep, np.asarray(ids), n_blocks)
-    jtj, rr, scores, grams = (np.asarray(a) for a in moments)
-    cond, reason, weak = conditioning(jtj[ix])
-    cov = None
-    if reason is None:
-        cov, reason = block_covariance(jtj[ix], scores[:, act], grams[:, act][:, :, act])
-    return cov, cond, reason, weak, float(rr), n_blocks
+    method = ("sandwich" if synthetic else "blocks") if errors == "auto" else errors
+    fallback = None
+    if method == "blocks":
+        ids, n_blocks = block_index(prep)
+        moments = objective_mod.natural_block_moments(obj, z, prep, np.asarray(ids), n_blocks)
+        jtj, rr, scores, grams = (np.asarray(a) for a in moments)
+        cond, reason, weak = conditioning(jtj[ix])
+        if reason is not None:
+            return _Errors(None, cond, reason, weak, float(rr), method, n_blocks)
+        jtj, grams = jtj[ix], grams[:, act][:, :, act]
+        cov, reason = block_covariance(jtj, scores[:, act], grams)
+        if cov is not None or errors != "auto":
+            dof = None
+            if cov is not None:
+                dof = effective_dof(jtj, grams)
+                f = coverage_factor(dof, LEVEL)
+                cov = cov * np.outer(f, f)
+            return _Errors(cov, cond, reason, weak, float(rr), method, n_blocks, dof)
+        method, fallback = "sandwich", reason
+    moments = objective_mod.natural_moments(obj, z, padded)
+    jtj, meat, ee, rr = (np.asarray(a) for a in moments)
+    cov, cond, reason, weak = covariance(jtj[ix], meat[ix], float(ee), 3 * prep.n, method)
+    return _Errors(cov, cond, reason, weak, float(rr), method, fallback=fallback)
 
 
 def assemble(
@@ -196,10 +233,12 @@ def assemble(
     cut: float | None,
     source: str,
     t0: float,
+    synthetic: bool = False,
 ) -> FitResult:
     """Uncertainties, information criteria, every metric and flags -> :class:`FitResult`
     of a fit under ``m`` (``preps``: the data prepared for every metric; ``padded``:
-    ``preps[m.name]`` :meth:`~brdffit.engine.metrics.Prepared.padded`, made here if not given).
+    ``preps[m.name]`` :meth:`~brdffit.engine.metrics.Prepared.padded`, made here if not given;
+    ``errors`` a kind of :data:`CHOICES`, ``synthetic`` whether the data are a model's values).
 
     The other metrics are padded only for their losses, at the end, sharing ``padded``'s
     geometry: padding every metric at the start of a fit held 3 more copies of the data
@@ -209,20 +248,32 @@ def assemble(
     padded = prep.padded() if padded is None else padded
     z = np.asarray(out.z)
     params = {k: np.asarray(v) for k, v in obj.params(z).items()}
-    cov = corr = stderr = None
+    cov = corr = stderr = dof = None
     cond, reason, weak_names, rss = float("nan"), None, [], float("nan")
-    n_data, n_blocks = 3 * prep.n, 0
+    n_data, n_blocks, fallback = 3 * prep.n, 0, None
+    method = ("sandwich" if synthetic else "blocks") if errors == "auto" else errors
     if out.status is not Status.NONFINITE:
         act = ~out.binding
-        cov_a, cond, reason, weak, rr, n_blocks = _free_covariance(
-            obj, z, prep, padded, act, errors
+        e = _free_covariance(obj, z, prep, padded, act, errors, synthetic)
+        cond, reason, method, n_blocks, fallback = (
+            e.cond,
+            e.reason,
+            e.method,
+            e.n_blocks,
+            e.fallback,
         )
-        rss = max(rr, 1e-300)
+        rss = max(e.rr, 1e-300)
         labels_act = [lab for lab, a in zip(layout.labels(), act, strict=True) if a]
-        weak_names = [lab for lab, w in zip(labels_act, weak, strict=True) if w]
-        if cov_a is not None:
+        weak_names = [lab for lab, w in zip(labels_act, e.weak, strict=True) if w]
+        if e.cov is not None:
             cov = np.full((layout.size, layout.size), np.nan)
-            cov[np.ix_(act, act)] = cov_a
+            cov[np.ix_(act, act)] = e.cov
+        if e.dof is not None:
+            nu = np.full(layout.size, np.nan)
+            nu[act] = e.dof
+            dof = {k: np.asarray(v) for k, v in layout.split(nu).items()}
+            dof = {p.name: dof.get(p.name, np.full(np.shape(params[p.name]), np.nan))
+                   for p in model.parameters}  # fmt: skip
     else:
         reason = "the fit is not finite"
     if cov is not None:
@@ -254,9 +305,10 @@ def assemble(
         correlation=corr,
         labels=tuple(layout.labels()),
         frozen=tuple(obj.frozen),
-        errors_method=errors,
+        errors_method=method,
         errors_reason=reason,
         error_blocks=n_blocks,
+        error_dof=dof,
         loss=losses[m.name],
         losses=losses,
         cost=0.5 * rss if finite else float("nan"),
@@ -273,42 +325,14 @@ def assemble(
         cut_deg=cut,
         source=source,
         at_bound=at_bound,
-        warnings=_warnings(at_bound, reason, out.status, cond, weak_names),
+        warnings=_warnings(at_bound, reason, out.status, cond, weak_names)
+        + ((f"errors by sandwich, not blocks: {fallback}",) if fallback else ()),
         not_identified=tuple(weak_names),
         coarse_samples=out.coarse[0],
         coarse_steps=out.coarse[1],
         robust=obj.robust,
         robust_scale=out.robust_scale,
     )
-
-
-def block_covariance(
-    jtj: np.ndarray, scores: np.ndarray, grams: np.ndarray, power: float = 1.0
-) -> tuple[np.ndarray | None, str | None]:
-    """The leverage-corrected cluster covariance (module docstring) and why not, if not.
-
-    ``jtj`` (k, k); ``scores`` (G, k) the blocks' ``J_b^T e_b``; ``grams`` (G, k, k) their
-    ``J_b^T J_b``. With ``M_b = A^-1/2 A_b A^-1/2 = V diag(l) V^T`` each block's
-    contribution is ``u_b = A^-1/2 V diag((1 - l)^-power) V^T A^-1/2 s_b``: ``power`` 1/2
-    is CR2 (Bell and McCaffrey), ``cov = sum u_b u_b^T``; 1 is the one-step jackknife CR3
-    (``u_b = (A - A_b)^-1 s_b``), ``cov = (G-1)/G sum u_b u_b^T``. None with a reason below
-    :data:`MIN_BLOCKS` blocks or when one block alone identifies a direction (``l`` -> 1).
-    """
-    g = scores.shape[0]
-    if g < MIN_BLOCKS:
-        return None, f"{g} blocks for errors='blocks', fewer than {MIN_BLOCKS}"
-    d = np.sqrt(np.diag(jtj))
-    ev, vec = np.linalg.eigh(jtj / np.outer(d, d))  # column-scaled, as in conditioning()
-    inv_half = vec @ np.diag(ev**-0.5) @ vec.T
-    u = np.empty_like(scores)
-    for b in range(g):
-        lev, v = np.linalg.eigh(inv_half @ (grams[b] / np.outer(d, d)) @ inv_half)
-        if not np.all(np.isfinite(lev)) or np.max(lev) > 1.0 - 1.0 / SINGULAR:
-            return None, f"block {b} alone identifies a direction of J^T J (errors='blocks')"
-        factor = v @ np.diag((1.0 - np.clip(lev, 0.0, None)) ** -power) @ v.T
-        u[b] = inv_half @ factor @ inv_half @ (scores[b] / d) / d
-    cov = u.T @ u * ((g - 1) / g if power == 1.0 else 1.0)
-    return 0.5 * (cov + cov.T), None
 
 
 def _warnings(at_bound, reason, status, cond, weak_names) -> tuple[str, ...]:

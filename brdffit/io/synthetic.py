@@ -57,8 +57,9 @@ def synthesize(
     - ``noise_mult``, ``noise_add``, ``missing``, ``seed``: see the module docstring.
     - ``source``: provenance text; a description of the generator by default.
 
-    Returns :class:`Measurements`; on the full MERL grid it can be written with
-    :func:`brdffit.write_merl`.
+    Returns :class:`Measurements` marked
+    :attr:`~brdffit.core.measurements.Measurements.synthetic`; on the full MERL grid it
+    can be written with :func:`brdffit.write_merl` (read back, it counts as measured).
     """
     if noise_mult < 0 or noise_add < 0 or not 0 <= missing < 1:
         raise ParameterError(
@@ -91,7 +92,8 @@ def synthesize(
         keep[idx] = False
     if grid == "merl":
         cube = f.T.reshape(3, *g.shape)
-        return merl_grid_measurements(
-            cube, source=source, stride=stride, valid=keep.reshape(g.shape)
-        )
-    return Measurements.from_directions(wi, wo, f, valid=keep, source=source)
+        valid = keep.reshape(g.shape)
+        out = merl_grid_measurements(cube, source=source, stride=stride, valid=valid)
+    else:
+        out = Measurements.from_directions(wi, wo, f, valid=keep, source=source)
+    return out.replace(synthetic=True)

@@ -183,7 +183,10 @@ def _fit_statistics(result: FitResult) -> list[list[str]]:
         [f"metric {result.metric}", _fmt(result.loss)],
         ["other metrics (same samples)", others or "none"],
         ["fit's angle cut", cut],
-        ["noise model", errors_assumed(result.errors_method, result.error_blocks)],
+        [
+            "noise model",
+            errors_assumed(result.errors_method, result.error_blocks, result.error_dof),
+        ],
         ["status", result.status.value],
         ["steps", f"{result.n_steps} (best of {result.n_starts} starts)"],
         ["samples", f"{result.n_samples} ({result.n_data} residuals), {result.n_free} free"],

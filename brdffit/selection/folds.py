@@ -1,7 +1,7 @@
 """Cross-validation for :func:`brdffit.simplify`: folds of whole cell blocks, and the test.
 
 :func:`deal_blocks` deals the 10-degree (theta_h, theta_d) blocks of
-:func:`brdffit.engine.uncertainty.block_index` to the folds so that every theta_h band and
+:func:`brdffit.engine.block_errors.block_index` to the folds so that every theta_h band and
 every theta_d band is spread evenly over them; :func:`feature_test` decides, from the
 per-fold held-out losses, whether a simpler variant predicts the held-out cells as well
 as the best one within a margin (:data:`MIN_GAIN`): a one-sided paired t-test
@@ -17,7 +17,7 @@ import numpy as np
 from scipy import stats
 
 from brdffit.engine import metrics
-from brdffit.engine.uncertainty import block_cells, block_index
+from brdffit.engine.block_errors import block_cells, block_index
 from brdffit.errors import ParameterError
 
 RESOLUTION = 1e-8
@@ -52,7 +52,7 @@ def fold_t(r: np.ndarray) -> float:
 
 def deal_blocks(prep: metrics.Prepared, folds: int, seed: int = 0) -> np.ndarray:
     """Each sample's fold, 0..``folds``-1: whole 10-degree (theta_h, theta_d) blocks
-    (:func:`brdffit.engine.uncertainty.block_index`) dealt so that every theta_h band and every
+    (:func:`brdffit.engine.block_errors.block_index`) dealt so that every theta_h band and every
     theta_d band is spread over the folds: the ``k``-th occupied block of the ``i``-th
     occupied theta_h band (in theta_d order) goes to fold ``(i + k) mod folds``, named by a
     seeded permutation. Each theta_h band is dealt round robin; so is each theta_d band,

@@ -23,7 +23,7 @@ affine parameters solved again, then one bounded LM descent: a few fits per step
 Criteria:
 
 * ``"cv"`` (default): held-out loss over ``folds`` folds of whole 10-degree
-  (theta_h, theta_d) blocks (:func:`brdffit.engine.uncertainty.block_index`), so a held-out
+  (theta_h, theta_d) blocks (:func:`brdffit.engine.block_errors.block_index`), so a held-out
   cell's neighbours, which share its model error, are held out with it. The blocks are
   dealt so that every theta_h band and every theta_d band is spread evenly over the
   folds (:func:`~brdffit.selection.folds.deal_blocks`). Each fold is fitted on the other folds

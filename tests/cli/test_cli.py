@@ -51,7 +51,7 @@ def test_info_and_fit_with_json(capsys, merl_file, tmp_path):
     code, out, _ = _run(capsys, "fit", merl_file, "--model", "walter", "--robust", "huber", *SMALL)
     assert code == 0 and "huber loss, scale" in out
     code, out, _ = _run(capsys, "fit", merl_file, "--model", "walter", "--errors", "blocks", *SMALL)
-    assert code == 0 and "errors by block jackknife over" in out
+    assert code == 0 and "errors by cluster sandwich (CR2) over" in out and "Student-t" in out
 
 
 def test_fit_with_options_and_freeze(capsys, merl_file):

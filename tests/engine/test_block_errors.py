@@ -1,4 +1,5 @@
-"""errors="blocks": the cluster jackknife over (theta_h, theta_d) blocks.
+"""errors="blocks": the cluster sandwich (CR2) over (theta_h, theta_d) blocks, with
+Student-t intervals on Bell and McCaffrey's degrees of freedom.
 
 Checked by simulation against the spread of the estimates themselves: Lambert data whose
 noise is shared by every sample of a 10-degree (theta_h, theta_d) block (the shape of
@@ -12,11 +13,16 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from brdffit import Measurements, ParameterError, fit_many, models
+from brdffit import Measurements, ParameterError, fit_many, models, synthesize
 from brdffit.core.result_terms import BLOCK_DEG
+from brdffit.engine.block_errors import (
+    block_covariance,
+    block_index,
+    coverage_factor,
+    effective_dof,
+)
 from brdffit.engine.metrics import get_metric, keep_mask, prepare
 from brdffit.engine.objective import Objective, block_moments, natural_moments
-from brdffit.engine.uncertainty import block_covariance, block_index
 from tests.helpers import random_pairs
 
 WI, WO = random_pairs(11, 4000)
@@ -76,10 +82,10 @@ def test_unknown_errors_kind_is_named():
 
 
 def test_block_errors_equal_refits_leaving_each_block_out_for_a_linear_model():
-    """Lambert under ngan is linear in kd: the one-step jackknife (errors="blocks", power 1
-    of the leverage correction) is exact there, so it must equal (G-1)/G sum_b d_b d_b^T
-    with d_b the move of a real refit without block b (weight 0: every refit keeps its
-    sample count)."""
+    """Lambert under ngan is linear in kd: the one-step jackknife (power 1 of the leverage
+    correction, CR3) is exact there, so it must equal (G-1)/G sum_b d_b d_b^T with d_b the
+    move of a real refit without block b (weight 0: every refit keeps its sample count).
+    The reported covariance is CR2 (power 1/2) widened by the t coverage factors."""
     data = _datasets(1, seed=5)[0]
     model = models.get("lambert")
     r = fit_many(model, [data], "ngan", errors="blocks", cut_deg=None)[0]
@@ -89,9 +95,11 @@ def test_block_errors_equal_refits_leaving_each_block_out_for_a_linear_model():
     z = jnp.asarray(obj.layout.solver_vector(r.params))
     jtj = np.asarray(natural_moments(obj, z, prep)[0])
     scores, grams = (np.asarray(a) for a in block_moments(obj, z, prep, jnp.asarray(ids), g))
-    cr3, _ = block_covariance(jtj, scores, grams)
-    cr2, _ = block_covariance(jtj, scores, grams, power=0.5)
-    np.testing.assert_allclose(cr3, r.covariance, rtol=1e-12)
+    cr3, _ = block_covariance(jtj, scores, grams, power=1.0)
+    cr2, _ = block_covariance(jtj, scores, grams)
+    f = coverage_factor(effective_dof(jtj, grams))
+    np.testing.assert_allclose(cr2 * np.outer(f, f), r.covariance, rtol=1e-12)
+    np.testing.assert_allclose(np.concatenate([r.error_dof["kd"]]), effective_dof(jtj, grams))
     keep = np.flatnonzero(keep_mask(data, None))
     left_out = []
     for b in range(g):
@@ -102,3 +110,54 @@ def test_block_errors_equal_refits_leaving_each_block_out_for_a_linear_model():
     moves = np.array([q.params["kd"] for q in refits]) - r.params["kd"]
     np.testing.assert_allclose(cr3, (g - 1) / g * moves.T @ moves, rtol=1e-6)
     assert np.all(np.diag(cr2) < np.diag(cr3))  # CR2 corrects the leverage half as much
+
+
+def _explicit_dof(x: np.ndarray, ids: np.ndarray, c: np.ndarray) -> float:
+    """Bell and McCaffrey's degrees of freedom written out with n x n matrices: the CR2
+    variance of ``c^T beta`` is ``e^T (I-H) G G^T (I-H) e``, column ``b`` of ``G`` being
+    ``(I - H_bb)^-1/2 X_b A^-1 c`` on block ``b``'s rows; nu from the eigenvalues of
+    ``G^T (I-H) G``."""
+    a_inv = np.linalg.inv(x.T @ x)
+    h = x @ a_inv @ x.T
+    cols = []
+    for b in np.unique(ids):
+        rows = ids == b
+        ev, v = np.linalg.eigh(np.eye(rows.sum()) - h[np.ix_(rows, rows)])
+        col = np.zeros(len(x))
+        col[rows] = v @ np.diag(ev**-0.5) @ v.T @ x[rows] @ a_inv @ c
+        cols.append(col)
+    g = np.array(cols).T
+    lam = np.linalg.eigvalsh(g.T @ (np.eye(len(x)) - h) @ g)
+    return lam.sum() ** 2 / np.sum(lam**2)
+
+
+def test_effective_dof_equal_the_explicit_satterthwaite_formula():
+    """effective_dof works on k x k block moments only; the explicit n x n formula is the
+    independent check, on blocks of unequal size and leverage (one block holds most of
+    the third column, as the specular peak holds a lobe's width)."""
+    rng = np.random.default_rng(4)
+    ids = np.repeat(np.arange(24), rng.integers(3, 12, 24))
+    x = rng.standard_normal((len(ids), 3)) * np.array([1.0, 3.0, 0.05])
+    x[ids == 5, 2] *= 40.0
+    grams = np.array([x[ids == b].T @ x[ids == b] for b in range(24)])
+    dof = effective_dof(x.T @ x, grams)
+    want = [_explicit_dof(x, ids, c) for c in np.eye(3)]
+    np.testing.assert_allclose(dof, want, rtol=1e-9)
+    assert dof[2] < 4 < dof[0]  # the scalar one block carries has few degrees of freedom
+    assert coverage_factor(np.array([1e9]))[0] == pytest.approx(1.0, abs=1e-6)
+    assert coverage_factor(np.array([1.0]))[0] == pytest.approx(12.706 / 1.960, rel=1e-3)
+
+
+def test_auto_errors_are_blocks_for_measured_and_sandwich_for_synthetic_data():
+    lam = models.get("lambert")
+    measured = _datasets(1, seed=6)[0]
+    synthetic = synthesize(lam, {"kd": KD}, grid="directions", directions=(WI, WO))
+    r_meas, r_syn = (fit_many(lam, [d], "ngan", cut_deg=None)[0] for d in (measured, synthetic))
+    assert synthetic.synthetic and not measured.synthetic
+    assert r_meas.errors_method == "blocks" and r_meas.error_dof is not None
+    assert r_syn.errors_method == "sandwich" and r_syn.error_dof is None
+    assert "Student-t" in r_meas.report()
+    few = Measurements.from_directions(WI[:12], WO[:12], measured.values[:12])
+    r_few = fit_many(lam, [few], "ngan", cut_deg=None)[0]
+    assert r_few.errors_method == "sandwich" and r_few.stderr is not None
+    assert any("not blocks" in w and "fewer than" in w for w in r_few.warnings)

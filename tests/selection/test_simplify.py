@@ -20,7 +20,7 @@ from scipy import stats
 from brdffit import ParameterError, Reduction, models, simplify, synthesize, write_sweep_html
 from brdffit.cli import main
 from brdffit.engine import metrics
-from brdffit.engine.uncertainty import block_cells, block_index
+from brdffit.engine.block_errors import block_cells, block_index
 from brdffit.errors import SweepError
 from brdffit.models._restrict import Restricted, make_neutral
 from brdffit.report import write_report

@@ -1,0 +1,135 @@
+"""The block errors of ``errors="blocks"``: cluster covariance over (theta_h, theta_d) blocks.
+
+Model error is a smooth function of (theta_h, theta_d): the residuals of a fit to
+measured data change sign over a few degrees (specular peak, Fresnel rise), so a
+:data:`~brdffit.core.result_terms.BLOCK_DEG`-degree block holds a stretch of correlated
+error while the 80-degree cut keeps 50-70 occupied blocks. The estimator, its small-sample
+degrees of freedom and why these are described in :mod:`brdffit.engine.uncertainty`;
+this module holds the arithmetic, on ``k x k`` matrices only: ``A = J^T J`` and each
+block's Gram matrix ``A_b = J_b^T J_b`` and score ``s_b = J_b^T e_b``
+(:meth:`brdffit.engine.objective.Objective.natural_block_moments`).
+
+Every function works on the column-scaled matrices (``A / outer(d, d)``, ``d`` the
+square root of ``diag(A)``), as :func:`brdffit.engine.uncertainty.conditioning` does, so
+scalars of very different units do not lose digits in the eigen-decompositions.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy import stats
+
+from brdffit.core.result_terms import BLOCK_DEG
+from brdffit.engine.metrics import Prepared
+
+MIN_BLOCKS = 20
+"""Fewer occupied blocks than this and ``errors="blocks"`` gives no errors (the cluster
+sum of ``G`` scores has rank ``< G`` and is unreliable for small ``G``)."""
+
+SINGULAR = 1e15
+"""A block's leverage (an eigenvalue of ``A^-1/2 A_b A^-1/2``, at most 1) within
+``1 / SINGULAR`` of 1 means that block alone identifies a direction: the leverage
+correction divides by ``1 - l``, which float64 resolves to 1 in 4.5e15."""
+
+
+def block_cells(prep: Prepared, block_deg: float = BLOCK_DEG) -> tuple[np.ndarray, np.ndarray]:
+    """Each sample's block coordinates ``(floor(theta_h / deg), floor(theta_d / deg))``."""
+    th = np.degrees(np.arccos(np.clip(np.asarray(prep.g.cos_h), -1.0, 1.0)))
+    td = np.degrees(np.arccos(np.clip(np.asarray(prep.g.cos_d), -1.0, 1.0)))
+    return np.floor(th / block_deg).astype(int), np.floor(td / block_deg).astype(int)
+
+
+def block_index(prep: Prepared, block_deg: float = BLOCK_DEG) -> tuple[np.ndarray, int]:
+    """Each sample's (theta_h, theta_d) block, numbered 0..G-1 over occupied blocks; G."""
+    i, j = block_cells(prep, block_deg)
+    per_row = int(np.ceil(90.0 / block_deg)) + 1
+    occupied, ids = np.unique(i * per_row + j, return_inverse=True)
+    return ids.astype(np.int32), int(occupied.size)
+
+
+def _leverages(
+    jtj: np.ndarray, grams: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[tuple[np.ndarray, np.ndarray]]] | str:
+    """``d``, ``A^-1/2``, ``A^1/2`` (column-scaled) and each block's ``(l, V)`` with
+    ``A^-1/2 A_b A^-1/2 = V diag(l) V^T``; or why not (a reason string)."""
+    g = grams.shape[0]
+    if g < MIN_BLOCKS:
+        return f"{g} blocks for errors='blocks', fewer than {MIN_BLOCKS}"
+    d = np.sqrt(np.diag(jtj))
+    ev, vec = np.linalg.eigh(jtj / np.outer(d, d))
+    inv_half = vec @ np.diag(ev**-0.5) @ vec.T
+    half = vec @ np.diag(ev**0.5) @ vec.T
+    per = []
+    for b in range(g):
+        lev, v = np.linalg.eigh(inv_half @ (grams[b] / np.outer(d, d)) @ inv_half)
+        if not np.all(np.isfinite(lev)) or np.max(lev) > 1.0 - 1.0 / SINGULAR:
+            return f"block {b} alone identifies a direction of J^T J (errors='blocks')"
+        per.append((np.clip(lev, 0.0, None), v))
+    return d, inv_half, half, per
+
+
+def block_covariance(
+    jtj: np.ndarray, scores: np.ndarray, grams: np.ndarray, power: float = 0.5
+) -> tuple[np.ndarray | None, str | None]:
+    """The leverage-corrected cluster covariance and why not, if not.
+
+    ``jtj`` (k, k); ``scores`` (G, k) the blocks' ``J_b^T e_b``; ``grams`` (G, k, k) their
+    ``J_b^T J_b``. With ``M_b = A^-1/2 A_b A^-1/2 = V diag(l) V^T`` each block's
+    contribution is ``u_b = A^-1/2 V diag((1 - l)^-power) V^T A^-1/2 s_b``: ``power`` 0 is
+    the plain cluster sandwich (CR1), 1/2 (default) CR2 (Bell and McCaffrey 2002),
+    ``cov = sum u_b u_b^T``; 1 is the one-step cluster jackknife CR3
+    (``u_b = (A - A_b)^-1 s_b``), ``cov = (G-1)/G sum u_b u_b^T``. None with a reason below
+    :data:`MIN_BLOCKS` blocks or when one block alone identifies a direction (``l`` -> 1).
+    """
+    parts = _leverages(jtj, grams)
+    if isinstance(parts, str):
+        return None, parts
+    d, inv_half, _, per = parts
+    g = scores.shape[0]
+    u = np.empty_like(scores)
+    for b, (lev, v) in enumerate(per):
+        factor = v @ np.diag((1.0 - lev) ** -power) @ v.T
+        u[b] = inv_half @ factor @ inv_half @ (scores[b] / d) / d
+    cov = u.T @ u * ((g - 1) / g if power == 1.0 else 1.0)
+    return 0.5 * (cov + cov.T), None
+
+
+def effective_dof(jtj: np.ndarray, grams: np.ndarray) -> np.ndarray | None:
+    """Each scalar's degrees of freedom for its CR2 variance (Bell and McCaffrey 2002).
+
+    The CR2 variance of scalar ``i`` is a quadratic form ``e^T (I-H) G G^T (I-H) e`` in the
+    errors, ``G``'s column ``b`` being block ``b``'s rows of ``(I - H_bb)^-1/2 J_b A^-1 c``
+    (``c`` the unit vector of ``i``, ``H = J A^-1 J^T``). Under independent errors of one
+    variance it is distributed as a weighted sum of chi-squares with weights the
+    eigenvalues ``lambda`` of ``B = G^T (I-H) G``, and Satterthwaite's approximation gives
+    ``nu = (sum lambda)^2 / sum lambda^2``. ``B`` needs no ``n``-sized matrix: with
+    ``q = A^-1/2 c`` and ``M_b = V diag(l) V^T``,
+    ``g_b^T g_b = q^T V diag(l / (1 - l)) V^T q`` and
+    ``J_b^T g_b = A^1/2 V diag(l / sqrt(1 - l)) V^T q``, so
+    ``B = diag(g_b^T g_b) - W A^-1 W^T`` with ``W``'s rows ``J_b^T g_b``. ``nu`` runs from 1
+    (one block carries the scalar) to ``G - 1``. None where :func:`block_covariance` gives
+    no covariance.
+    """
+    parts = _leverages(jtj, grams)
+    if isinstance(parts, str):
+        return None
+    _, inv_half, half, per = parts
+    a_inv = inv_half @ inv_half
+    gram_terms = [v @ np.diag(lev / (1.0 - lev)) @ v.T for lev, v in per]
+    cross = [half @ v @ np.diag(lev / np.sqrt(1.0 - lev)) @ v.T for lev, v in per]
+    k = jtj.shape[0]
+    dof = np.empty(k)
+    for i in range(k):
+        q = inv_half[:, i]
+        gg = np.array([q @ t @ q for t in gram_terms])
+        w = np.array([c @ q for c in cross])
+        lam = np.linalg.eigvalsh(np.diag(gg) - w @ a_inv @ w.T)
+        dof[i] = lam.sum() ** 2 / np.sum(lam**2)
+    return dof
+
+
+def coverage_factor(dof: np.ndarray, level: float = 0.95) -> np.ndarray:
+    """``t_q(nu) / z_q``, ``q = (1 + level) / 2``: the factor that widens a normal interval
+    into Student's for ``nu`` degrees of freedom (1 for ``nu`` -> inf; 6.5 at ``nu`` = 1)."""
+    q = 0.5 * (1.0 + level)
+    return stats.t.ppf(q, np.asarray(dof, float)) / stats.norm.ppf(q)
