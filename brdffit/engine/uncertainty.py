@@ -163,6 +163,13 @@ def covariance(
     return 0.5 * (cov + cov.T), cond, None, weak
 
 
+def resolve(errors: str, synthetic: bool) -> str:
+    """The kind ``errors`` (:data:`CHOICES`) stands for on measured or ``synthetic`` data."""
+    if errors != "auto":
+        return errors
+    return "sandwich" if synthetic else "blocks"
+
+
 @dataclass(frozen=True)
 class _Errors:
     """The free scalars' covariance and what came with it (:func:`_free_covariance`).
@@ -197,8 +204,7 @@ def _free_covariance(
     ``prep`` padded, for the sums that padding leaves unchanged; ``synthetic``: the data
     are a model's values, for ``"auto"``, module docstring)."""
     ix = np.ix_(act, act)
-    method = ("sandwich" if synthetic else "blocks") if errors == "auto" else errors
-    fallback = None
+    method, fallback = resolve(errors, synthetic), None
     if method == "blocks":
         ids, n_blocks = block_index(prep)
         moments = objective_mod.natural_block_moments(obj, z, prep, np.asarray(ids), n_blocks)
@@ -251,17 +257,12 @@ def assemble(
     cov = corr = stderr = dof = None
     cond, reason, weak_names, rss = float("nan"), None, [], float("nan")
     n_data, n_blocks, fallback = 3 * prep.n, 0, None
-    method = ("sandwich" if synthetic else "blocks") if errors == "auto" else errors
+    method = resolve(errors, synthetic)
     if out.status is not Status.NONFINITE:
         act = ~out.binding
         e = _free_covariance(obj, z, prep, padded, act, errors, synthetic)
-        cond, reason, method, n_blocks, fallback = (
-            e.cond,
-            e.reason,
-            e.method,
-            e.n_blocks,
-            e.fallback,
-        )
+        cond, reason, method = e.cond, e.reason, e.method
+        n_blocks, fallback = e.n_blocks, e.fallback
         rss = max(e.rr, 1e-300)
         labels_act = [lab for lab, a in zip(layout.labels(), act, strict=True) if a]
         weak_names = [lab for lab, w in zip(labels_act, e.weak, strict=True) if w]

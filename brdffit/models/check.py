@@ -11,8 +11,10 @@ dtype's range (``tests/models/test_precision.py`` holds every model to that in f
 against a higher-precision reference), and a wrong small finite number would be worse.
 ``brdffit check`` prints the rows as a table (:func:`format_table`).
 
-Values and gradients are compiled (:func:`_values`, :func:`_gradients`), as the fitter
-runs them: one program per model, dtype and pair count serves every parameter set.
+Values and gradients are compiled together (:func:`_values_and_gradients`), as the
+fitter runs them: one program per model, dtype and pair count serves every parameter
+set and the below-horizon pairs (a separate program for the values alone doubled the
+compile time of the model tests that run these checks).
 Evaluated op by op, SGD's first check took 12.6 s (each operation of its quadrature
 compiled on its own), compiled 3.9 s; walter 3.4 s and 1.2 s.
 """
@@ -151,29 +153,23 @@ def _below_horizon_nonzero(model: AbstractModel, params: Mapping, wi, wo) -> int
     flip = jnp.asarray([[1.0, 1.0, -1.0]], wi.dtype)
     count = 0
     for a, b in ((wi, wo * flip), (wi * flip, wo)):
-        f = np.asarray(_values(model, params, a, b))
+        f = np.asarray(_values_and_gradients(model, params, a, b)[0])
         count += int(np.sum(_rows_with(f != 0)))
     return count
 
 
 @eqx.filter_jit
-def _values(model: AbstractModel, params: Mapping, wi, wo) -> jax.Array:
-    """``model.eval``, compiled."""
-    return model.eval(params, wi, wo)
+def _values_and_gradients(
+    model: AbstractModel, params: Mapping, wi, wo
+) -> tuple[jax.Array, dict[str, jax.Array]]:
+    """``model.eval`` and the gradient of ``sum(f)`` over the pairs with respect to every
+    parameter, as one compiled program (the forward pass is the gradient's own)."""
+    f, pullback = jax.vjp(lambda p: model.eval(p, wi, wo), params)
+    return f, pullback(jnp.ones_like(f))[0]
 
 
-@eqx.filter_jit
-def _gradients(model: AbstractModel, params: Mapping, wi, wo) -> dict[str, jax.Array]:
-    """Gradient of ``sum(f)`` over the pairs with respect to every parameter, compiled."""
-    return jax.grad(lambda p: jnp.sum(model.eval(p, wi, wo)))(params)
-
-
-def _nonfinite_grads(model: AbstractModel, params: Mapping, wi, wo) -> dict[str, int]:
-    """Parameter name -> number of its scalars whose gradient of ``sum(f)`` is not finite.
-
-    ``wi``, ``wo``: the pairs to sum over (those with finite values).
-    """
-    grads = _gradients(model, params, wi, wo)
+def _nonfinite_grads(grads: Mapping[str, jax.Array]) -> dict[str, int]:
+    """Parameter name -> number of its scalars whose gradient is not finite."""
     return {k: int(np.sum(~np.isfinite(np.asarray(g)))) for k, g in grads.items()}
 
 
@@ -189,13 +185,15 @@ def check_params(
     jdtype = DTYPES[dtype]
     wi, wo = (jnp.asarray(w, jdtype) for w in extreme_pairs())
     p = model.cast(params, jdtype)
-    f_arr = _values(model, p, wi, wo)
+    f_arr, grads = _values_and_gradients(model, p, wi, wo)
     f = np.asarray(f_arr)
     finite = np.isfinite(f)
     overflow = _rows_with(f == np.inf)
     nonfinite, negative = _rows_with(~finite & (f != np.inf)), _rows_with(f < 0)
     keep = ~_rows_with(~finite)
-    grad_bad = _nonfinite_grads(model, p, wi[keep], wo[keep])
+    if not keep.all():  # the gradient over the pairs with finite values only
+        grads = _values_and_gradients(model, p, wi[keep], wo[keep])[1]
+    grad_bad = _nonfinite_grads(grads)
     names = extreme_pair_names()
     return CheckRow(
         model=models.label(model),

@@ -22,13 +22,17 @@ from tests.helpers import params_at_bounds, random_pairs, random_params, rotate_
 IDS = [c.id for c in CASES]
 
 
-def _heavy_rows_slow() -> list:
-    """CASES with the option rows of SGD and STD marked ``slow`` (their first rows stay):
-    each of those rows compiles a quadrature-based Smith term (SGD's table, STD's
-    continued fraction), 3-36 s a row, about 70 s of the extremes test in all."""
+def _option_rows_slow() -> list:
+    """CASES with every row but each model's first marked ``slow``, for the two tests that
+    compile a program per row (and dtype): the extremes and jit/vmap checks of the option
+    rows took about 150 s of the default suite's CPU time. The default suite keeps each
+    model's base form at the extremes and bounds in both precisions, and every option
+    row in the cheaper tests of this file (positivity, reciprocity, rotation, float32
+    against float64) and in its model's reference tests; ``benchmarks/slow_checks.sh``
+    runs the rest."""
     seen, out = set(), []
     for c in CASES:
-        slow = c.model in ("sgd", "std") and c.model in seen
+        slow = c.model in seen
         out.append(pytest.param(c, id=c.id, marks=pytest.mark.slow if slow else ()))
         seen.add(c.model)
     return out
@@ -76,7 +80,7 @@ def test_isotropic_models_ignore_rotation_about_normal(case):
 
 @pytest.mark.parametrize("dtype", ["float32", "float64"])
 @pytest.mark.parametrize("which", ["case", "low", "high"])
-@pytest.mark.parametrize("case", _heavy_rows_slow())
+@pytest.mark.parametrize("case", _option_rows_slow())
 def test_extremes_finite_value_and_gradient(case, which, dtype):
     """brdffit.models.check on the extreme pairs: finite, non-negative f and finite d sum(f)/dp."""
     model, params = case.build()
@@ -86,7 +90,7 @@ def test_extremes_finite_value_and_gradient(case, which, dtype):
     assert row.passed, row
 
 
-@pytest.mark.parametrize("case", _heavy_rows_slow())
+@pytest.mark.parametrize("case", _option_rows_slow())
 def test_jit_and_vmap_agree_with_eager(case):
     model, params = case.build()
     wi, wo = random_pairs(2, 16)
