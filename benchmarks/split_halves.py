@@ -94,11 +94,11 @@ def errors_at_optimum(model, data: Measurements, metric: str, block_deg: float) 
     z = jnp.asarray(obj.layout.solver_vector(r.params))
     prep = prepare(data, get_metric(metric), cut_deg=None)
     x = obj.layout.natural_vector(r.params)
-    act = np.ones(x.size, bool)
-    if r.stderr is not None:
-        act = np.isfinite(np.concatenate([np.ravel(r.stderr[p]) for p in r.params]))
-    ix = np.ix_(act, act)
     out = {k: np.full(x.size, np.nan) for k in KINDS}
+    if r.stderr is None:  # no covariance at this optimum (singular J^T J): no scalar
+        return x, out, r
+    act = np.isfinite(np.concatenate([np.ravel(r.stderr[p]) for p in r.params]))
+    ix = np.ix_(act, act)
     jtj, meat, ee, _ = (np.asarray(a) for a in objective_mod.natural_moments(obj, z, prep))
     cov = covariance(jtj[ix], meat[ix], float(ee), 3 * prep.n, "sandwich")[0]
     if cov is not None:

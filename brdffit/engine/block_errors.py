@@ -56,7 +56,11 @@ def _leverages(
     if g < MIN_BLOCKS:
         return f"{g} blocks for errors='blocks', fewer than {MIN_BLOCKS}"
     d = np.sqrt(np.diag(jtj))
+    if not (np.all(np.isfinite(jtj)) and np.all(d > 0) and np.all(np.isfinite(grams))):
+        return "J^T J or a block's Gram matrix is not finite, or a column is zero"
     ev, vec = np.linalg.eigh(jtj / np.outer(d, d))
+    if ev[0] <= 0.0:
+        return "J^T J is singular (errors='blocks')"
     inv_half = vec @ np.diag(ev**-0.5) @ vec.T
     half = vec @ np.diag(ev**0.5) @ vec.T
     per = []

@@ -161,3 +161,11 @@ def test_auto_errors_are_blocks_for_measured_and_sandwich_for_synthetic_data():
     r_few = fit_many(lam, [few], "ngan", cut_deg=None)[0]
     assert r_few.errors_method == "sandwich" and r_few.stderr is not None
     assert any("not blocks" in w and "fewer than" in w for w in r_few.warnings)
+
+
+def test_a_singular_or_non_finite_gram_matrix_is_a_reason_not_an_exception():
+    grams = np.repeat(np.eye(2)[None] / 30.0, 30, axis=0)
+    for jtj in (np.array([[1.0, np.nan], [np.nan, 1.0]]), np.array([[1.0, 1.0], [1.0, 1.0]])):
+        cov, reason = block_covariance(jtj, np.zeros((30, 2)), grams)
+        assert cov is None and ("not finite" in reason or "singular" in reason)
+        assert effective_dof(jtj, grams) is None
