@@ -34,9 +34,9 @@ scalars; the factor by which the stated 95% intervals would have to be scaled to
 sandwich 19.5, CR1 3.28, CR2 with normal quantiles 1.83, CR3 (the previous default)
 0.66, CR2 with the t widening 0.83 (NBRDF 0.84, RGL 0.78). The last is the default,
 the only one within 1.25x of calibrated there; with other models and metrics it gives
-1.22 (walter, ngan), 0.79 (cook_torrance) and 0.81 (disney), the same file. It needs many blocks (it counts them,
-:func:`brdffit.core.result_terms.errors_assumed`) and none that alone identifies a
-parameter.
+1.22 (walter, ngan), 0.79 (cook_torrance) and 0.81 (disney), the same file. It needs
+many blocks (it counts them, :func:`brdffit.core.result_terms.errors_assumed`) and none
+that alone identifies a parameter.
 
 ``errors="auto"`` (the default of :func:`brdffit.fit`) is ``"blocks"`` for measured data
 and ``"sandwich"`` for synthetic data (:attr:`~brdffit.core.measurements.Measurements.synthetic`:
