@@ -130,7 +130,7 @@ class Measurements:
       evaluated: "outside the cut", not "not measured"), or ``None``.
     - ``stride``: the MERL sub-grid stride when the samples are a strided MERL grid in
       order (:func:`brdffit.io.merl_grid.merl_grid`), else ``None``.
-    - ``synthetic``: True when the values are a model's own (:func:`brdffit.synthetic`),
+    - ``synthetic``: True when the values are a model's own (:func:`brdffit.synthesize`),
       so a fit of that model has no model error; decides the default standard errors
       (``errors="auto"``, :mod:`brdffit.engine.uncertainty`). False for everything read
       or built from arrays.
