@@ -523,23 +523,19 @@ def run_dataset(job: tuple[str, int, tuple[str, ...]], cfg: Config) -> dict:
         r = _sandwich_fit(case, data, metric, cfg)
         if "lm_sandwich" in kinds:
             rec["lm_sandwich"] = _lm_record(model, mc.lobe_key, r)
-        if "lm_classic" in kinds:
+        for kind in ("lm_classic", "lm_blocks"):
+            if kind not in kinds:
+                continue
             # Same optimum: started there, it stops at once; only the covariance differs.
             rc = fit(
                 model, data, metric, init=r.params, screen=0, n_restarts=0, cut_deg=CUT_DEG,
-                errors="classic", throw=False,
+                errors=kind[3:], throw=False,
             )  # fmt: skip
-            rec["lm_classic"] = _lm_record(model, mc.lobe_key, rc)
-            rec["lm_classic"]["max_rel_change"] = float(
+            rec[kind] = _lm_record(model, mc.lobe_key, rc)
+            rec[kind]["max_rel_change"] = float(
                 np.max(np.abs(flat(model, rc.params) - flat(model, r.params))
                        / np.maximum(np.abs(flat(model, r.params)), 1e-12))
             )  # fmt: skip
-        if "lm_blocks" in kinds:
-            rb = fit(
-                model, data, metric, init=r.params, screen=0, n_restarts=0, cut_deg=CUT_DEG,
-                errors="blocks", throw=False,
-            )  # fmt: skip
-            rec["lm_blocks"] = _lm_record(model, mc.lobe_key, rb)
         n_steps, burn = cfg.steps(mc)
         for kind in kinds:
             if not kind.startswith("post_"):
