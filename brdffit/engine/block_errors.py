@@ -111,7 +111,7 @@ def effective_dof(jtj: np.ndarray, grams: np.ndarray) -> np.ndarray | None:
     ``g_b^T g_b = q^T V diag(l / (1 - l)) V^T q`` and
     ``J_b^T g_b = A^1/2 V diag(l / sqrt(1 - l)) V^T q``, so
     ``B = diag(g_b^T g_b) - W A^-1 W^T`` with ``W``'s rows ``J_b^T g_b``. ``nu`` runs from 1
-    (one block carries the scalar) to ``G - 1``. None where :func:`block_covariance` gives
+    (one block carries the scalar) to at most ``G``. None where :func:`block_covariance` gives
     no covariance.
     """
     parts = _leverages(jtj, grams)

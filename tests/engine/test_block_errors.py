@@ -99,7 +99,7 @@ def test_block_errors_equal_refits_leaving_each_block_out_for_a_linear_model():
     cr2, _ = block_covariance(jtj, scores, grams)
     f = coverage_factor(effective_dof(jtj, grams))
     np.testing.assert_allclose(cr2 * np.outer(f, f), r.covariance, rtol=1e-12)
-    np.testing.assert_allclose(np.concatenate([r.error_dof["kd"]]), effective_dof(jtj, grams))
+    np.testing.assert_allclose(r.error_dof["kd"], effective_dof(jtj, grams))
     keep = np.flatnonzero(keep_mask(data, None))
     left_out = []
     for b in range(g):
