@@ -88,6 +88,11 @@ def block_covariance(
     parts = _leverages(jtj, grams)
     if isinstance(parts, str):
         return None, parts
+    return _cluster_cov(parts, scores, power), None
+
+
+def _cluster_cov(parts: tuple, scores: np.ndarray, power: float) -> np.ndarray:
+    """:func:`block_covariance` from :func:`_leverages`' parts."""
     d, inv_half, _, per = parts
     g = scores.shape[0]
     u = np.empty_like(scores)
@@ -95,7 +100,7 @@ def block_covariance(
         factor = v @ np.diag((1.0 - lev) ** -power) @ v.T
         u[b] = inv_half @ factor @ inv_half @ (scores[b] / d) / d
     cov = u.T @ u * ((g - 1) / g if power == 1.0 else 1.0)
-    return 0.5 * (cov + cov.T), None
+    return 0.5 * (cov + cov.T)
 
 
 def effective_dof(jtj: np.ndarray, grams: np.ndarray) -> np.ndarray | None:
@@ -115,13 +120,15 @@ def effective_dof(jtj: np.ndarray, grams: np.ndarray) -> np.ndarray | None:
     no covariance.
     """
     parts = _leverages(jtj, grams)
-    if isinstance(parts, str):
-        return None
+    return None if isinstance(parts, str) else _dof(parts, jtj.shape[0])
+
+
+def _dof(parts: tuple, k: int) -> np.ndarray:
+    """:func:`effective_dof` from :func:`_leverages`' parts."""
     _, inv_half, half, per = parts
     a_inv = inv_half @ inv_half
     gram_terms = [v @ np.diag(lev / (1.0 - lev)) @ v.T for lev, v in per]
     cross = [half @ v @ np.diag(lev / np.sqrt(1.0 - lev)) @ v.T for lev, v in per]
-    k = jtj.shape[0]
     dof = np.empty(k)
     for i in range(k):
         q = inv_half[:, i]
@@ -137,3 +144,17 @@ def coverage_factor(dof: np.ndarray, level: float = 0.95) -> np.ndarray:
     into Student's for ``nu`` degrees of freedom (1 for ``nu`` -> inf; 6.5 at ``nu`` = 1)."""
     q = 0.5 * (1.0 + level)
     return stats.t.ppf(q, np.asarray(dof, float)) / stats.norm.ppf(q)
+
+
+def block_errors(
+    jtj: np.ndarray, scores: np.ndarray, grams: np.ndarray, level: float = 0.95
+) -> tuple[np.ndarray | None, np.ndarray | None, str | None]:
+    """What ``errors="blocks"`` reports: the CR2 covariance widened by each scalar's
+    :func:`coverage_factor` at ``level`` (``cov * outer(f, f)``), the degrees of freedom,
+    and why not, if not; the blocks' leverages are decomposed once for both."""
+    parts = _leverages(jtj, grams)
+    if isinstance(parts, str):
+        return None, None, parts
+    dof = _dof(parts, jtj.shape[0])
+    f = coverage_factor(dof, level)
+    return _cluster_cov(parts, scores, 0.5) * np.outer(f, f), dof, None

@@ -20,11 +20,12 @@ CR2 undoes that shrinkage exactly for a linear model with independent errors.
 A few blocks carry the specular parameters, so their variance is estimated from a few
 numbers and the normal quantile 1.96 is too small. Each scalar's effective degrees of
 freedom ``nu`` are Bell and McCaffrey's Satterthwaite approximation
-(:func:`effective_dof`, as Imbens and Kolesar 2016 and Pustejovsky and Tipton 2018
-recommend for few or unequal clusters), and the 95% interval is ``t_0.975(nu)`` CR2
-errors wide: the reported standard error is the CR2 error times ``t_0.975(nu) / 1.96``
-(:func:`coverage_factor`, the coverage factor of the GUM's expanded uncertainty), so
-that ``value +/- 1.96 stderr`` is that interval everywhere brdffit draws one, and
+(:func:`~brdffit.engine.block_errors.effective_dof`, as Imbens and Kolesar 2016 and
+Pustejovsky and Tipton 2018 recommend for few or unequal clusters), and the 95% interval
+is ``t_0.975(nu)`` CR2 errors wide: the reported standard error is the CR2 error times
+``t_0.975(nu) / 1.96`` (:func:`~brdffit.engine.block_errors.coverage_factor`, the
+coverage factor of the GUM's expanded uncertainty), so that ``value +/- 1.96 stderr`` is
+that interval everywhere brdffit draws one, and
 ``nu`` is kept in :attr:`~brdffit.core.result.FitResult.error_dof`.
 
 Which estimator, by measurement (``benchmarks/split_halves.py``: walter fitted to two
@@ -61,12 +62,7 @@ from brdffit.core.parameters import ParameterLayout, Params
 from brdffit.core.result import FitResult, Status
 from brdffit.core.result_terms import AT_BOUND_ATOL, AT_BOUND_RTOL
 from brdffit.engine import objective as objective_mod
-from brdffit.engine.block_errors import (
-    block_covariance,
-    block_index,
-    coverage_factor,
-    effective_dof,
-)
+from brdffit.engine.block_errors import block_errors, block_index
 from brdffit.engine.metrics import Metric, Prepared
 from brdffit.engine.objective import Objective
 
@@ -87,7 +83,8 @@ CHOICES = ("auto", *ERRORS)
 """What ``errors=`` accepts: a kind of :data:`ERRORS`, or ``"auto"`` (module docstring)."""
 
 LEVEL = 0.95
-"""The interval the ``"blocks"`` errors are widened for (:func:`coverage_factor`)."""
+"""The interval the ``"blocks"`` errors are widened for
+(:func:`~brdffit.engine.block_errors.coverage_factor`)."""
 
 
 @dataclass(frozen=True)
@@ -147,7 +144,7 @@ def covariance(
     """Covariance of the scalars from ``J^T J``, the sandwich's meat and ``e.e``.
 
     ``meat`` is ``J^T diag(e^2) J``; ``method`` ``"sandwich"`` or ``"classic"``
-    (:data:`ERRORS`; ``"blocks"`` is :func:`block_covariance`).
+    (:data:`ERRORS`; ``"blocks"`` is :func:`~brdffit.engine.block_errors.block_errors`).
 
     Returns (cov, condition, reason, weak): cov None with a reason where
     :func:`conditioning` gives one, which also gives condition and weak.
@@ -214,13 +211,8 @@ def _free_covariance(
         if reason is not None:
             return _Errors(None, cond, reason, weak, float(rr), method, n_blocks)
         jtj, grams = jtj[ix], grams[:, act][:, :, act]
-        cov, reason = block_covariance(jtj, scores[:, act], grams)
+        cov, dof, reason = block_errors(jtj, scores[:, act], grams, LEVEL)
         if cov is not None or errors != "auto":
-            dof = None
-            if cov is not None:
-                dof = effective_dof(jtj, grams)
-                f = coverage_factor(dof, LEVEL)
-                cov = cov * np.outer(f, f)
             return _Errors(cov, cond, reason, weak, float(rr), method, n_blocks, dof)
         method, fallback = "sandwich", reason
     moments = objective_mod.natural_moments(obj, z, padded)
