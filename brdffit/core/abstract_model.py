@@ -135,6 +135,20 @@ class AbstractModel(eqx.Module):
         return "\n".join(lines)
 
 
+@eqx.filter_jit
+def eval_compiled(
+    model: AbstractModel, params: Mapping[str, object], wi: ArrayLike, wo: ArrayLike
+) -> Float[Array, "n 3"]:
+    """``model.eval(params, wi, wo)`` compiled once per model (its options), dtype and
+    direction count, then reused for every parameter value; f in 1/sr, (N, 3).
+
+    Eagerly, every operation of the model compiles on its own the first time it meets a
+    shape (about 30 small programs for walter, together about 1 s on a CPU), and the
+    runtime type checks of every term, where they are on, cost more than the evaluation.
+    """
+    return model.eval(params, wi, wo)
+
+
 def linear_split(
     model: AbstractModel, params: Params, g: ShadingGeometry, names: tuple[str, ...]
 ) -> tuple[jax.Array, jax.Array]:

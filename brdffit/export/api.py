@@ -25,11 +25,11 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
-import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
 from brdffit import models
+from brdffit.core.abstract_model import eval_compiled
 from brdffit.core.result import FitResult
 from brdffit.errors import ExportError, ExportValueError
 from brdffit.export import _numbers, gltf, materialx, mitsuba
@@ -145,12 +145,9 @@ def default_prefix(input_path: str | Path, json_path: str | Path | None, label: 
     return Path(f"{Path(input_path).stem}.{safe}")
 
 
-@eqx.filter_jit
-def evaluate_model(model: object, params: dict, wi: jnp.ndarray, wo: jnp.ndarray) -> jnp.ndarray:
-    """``model.eval(params, wi, wo)`` compiled once per model and options, then reused for
-    every parameter value (an export evaluates the model at 2,556 pairs; eagerly, the
-    runtime type checks of every term cost more than the evaluation). f in 1/sr, (N, 3)."""
-    return model.eval(params, wi, wo)
+evaluate_model = eval_compiled
+"""``model.eval(params, wi, wo)`` compiled once per model and options, then reused for
+every parameter value (an export evaluates the model at 2,556 pairs). f in 1/sr, (N, 3)."""
 
 
 @dataclass(frozen=True, eq=False)

@@ -38,11 +38,9 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 
-import equinox as eqx
-import jax
 import numpy as np
 
-from brdffit.core.abstract_model import AbstractModel
+from brdffit.core.abstract_model import AbstractModel, eval_compiled
 from brdffit.core.result import FitResult
 from brdffit.export._match import Family, Match, Slot, first_of, generic_alpha, walter_lobes
 from brdffit.models import label
@@ -55,11 +53,6 @@ CHUNK = 1024
 compilation per feature set serves every direction count."""
 PERCEPTUAL = ("gltf", "disney", "filament", "principled", "course_cook_torrance", "openpbr")
 """Models whose ``roughness`` is perceptual already (``alpha = roughness^2``)."""
-
-
-@eqx.filter_jit
-def _eval(model: OpenPbr, params: dict, wi: jax.Array, wo: jax.Array) -> jax.Array:
-    return model.eval(params, wi, wo)
 
 
 def roughness_of(ax: float, ay: float) -> dict[str, float]:
@@ -88,9 +81,8 @@ def openpbr_family(model: OpenPbr) -> Family:
         n = len(wi)
         up = np.tile([0.0, 0.0, 1.0], (-n % CHUNK, 1))
         wi, wo = np.vstack([wi, up]), np.vstack([wo, up])
-        parts = [
-            _eval(model, params, wi[k : k + CHUNK], wo[k : k + CHUNK]) for k in range(0, n, CHUNK)
-        ]
+        ends = range(0, n, CHUNK)
+        parts = [eval_compiled(model, params, wi[k : k + CHUNK], wo[k : k + CHUNK]) for k in ends]
         return np.concatenate([np.asarray(f, float) for f in parts])[:n]
 
     def build(p: Mapping[str, object]) -> dict:

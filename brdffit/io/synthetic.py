@@ -19,7 +19,7 @@ from collections.abc import Mapping
 import jax.numpy as jnp
 import numpy as np
 
-from brdffit.core.abstract_model import AbstractModel
+from brdffit.core.abstract_model import AbstractModel, eval_compiled
 from brdffit.core.geometry import uniform_hemisphere
 from brdffit.core.measurements import Measurements
 from brdffit.errors import ParameterError
@@ -81,7 +81,7 @@ def synthesize(
         raise ParameterError(
             f"grid={grid!r}: use 'merl', 'random' or 'directions' (with directions=(wi, wo))"
         )
-    f = np.asarray(model.eval(full, jnp.asarray(wi), jnp.asarray(wo)), dtype=float)
+    f = np.asarray(eval_compiled(model, full, jnp.asarray(wi), jnp.asarray(wo)), dtype=float)
     if noise_mult:
         f = f * np.exp(noise_mult * rng.standard_normal(f.shape))
     if noise_add:

@@ -17,13 +17,11 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping
 
-import equinox as eqx
-import jax
 import jax.numpy as jnp
 import numpy as np
 
 from brdffit import models
-from brdffit.core.abstract_model import AbstractModel
+from brdffit.core.abstract_model import AbstractModel, eval_compiled
 from brdffit.core.measurements import Measurements
 from brdffit.core.result import FitResult
 from brdffit.errors import MeasurementsError
@@ -48,15 +46,11 @@ def model_brdf(fit: Fit) -> tuple[AbstractModel, Brdf]:
         n = len(wi)
         up = np.broadcast_to([0.0, 0.0, 1.0], (-n % _CHUNK, 3))  # pad: one compiled shape
         pairs = jnp.asarray(np.stack([np.concatenate([wi, up]), np.concatenate([wo, up])]))
-        out = [_eval(model, p, *pairs[:, i : i + _CHUNK]) for i in range(0, pairs.shape[1], _CHUNK)]
+        ends = range(0, pairs.shape[1], _CHUNK)
+        out = [eval_compiled(model, p, *pairs[:, i : i + _CHUNK]) for i in ends]
         return np.concatenate([np.asarray(o) for o in out])[:n]
 
     return model, brdf
-
-
-@eqx.filter_jit
-def _eval(model: AbstractModel, params: dict, wi: jax.Array, wo: jax.Array) -> jax.Array:
-    return model.eval(params, wi, wo)
 
 
 def slice_indices(

@@ -14,7 +14,9 @@ def test_noise_free_values_equal_model_on_the_grid():
     m = models.get("walter")
     data = synthesize(m, TRUTH, stride=(9, 9, 9))
     f = np.asarray(m.eval({k: np.asarray(v, float) for k, v in TRUTH.items()}, data.wi, data.wo))
-    assert np.array_equal(data.values[data.valid], f[data.valid])
+    # synthesize evaluates the model compiled, this is op by op: XLA's fusion may round
+    # differently in the last bit
+    np.testing.assert_allclose(data.values[data.valid], f[data.valid], rtol=1e-13, atol=0)
     # Every above-horizon cell is valid when nothing is missing.
     assert data.n_valid == int(np.sum((data.wi[:, 2] > 0) & (data.wo[:, 2] > 0)))
 
