@@ -101,6 +101,8 @@ class Program:
             trees.append(tree)
             return tuple(ys)
 
+        flat.__name__ = flat.__qualname__ = self.fn.__name__  # names it in JAX's logs
+
         path = _stored_path(self.name, key)
         if path is None:
             entry = _Entry(jax.jit(flat))
