@@ -15,6 +15,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from brdffit.util import programs
+from brdffit.util.jax_config import CACHE_MAX_BYTES
 from brdffit.util.programs import Program
 
 
@@ -75,6 +76,7 @@ _SCRIPT = textwrap.dedent(
     r = fit(m, data, "low_e2")
     print(json.dumps({
         "exported": len(exported), "read": sum(read),
+        "max_size": jax.config.jax_compilation_cache_max_size,
         "loss": r.loss.hex(), "params": {k: v.tolist() for k, v in r.params.items()},
         "stderr": {k: v.tolist() for k, v in r.stderr.items()},
         "files": sorted(p.name.split("-")[0] for p in programs.store_folder().iterdir()),
@@ -95,6 +97,8 @@ def _run(cache: Path) -> dict:
 def test_a_fresh_process_fits_from_stored_programs_to_the_same_bits(tmp_path):
     first = _run(tmp_path)
     assert first["exported"] > 0 and first["read"] == 0
+    # bounded, so JAX locks the folder: processes sharing it never read a half-written file
+    assert first["max_size"] == CACHE_MAX_BYTES
     stored = set(first["files"])
     fit_programs = {"shading_geometry", "select_one", "race", "natural_moments", "all_losses"}
     assert fit_programs <= stored, stored
