@@ -180,20 +180,25 @@ def test_finite_values_and_gradients_at_extremes(which, dtype):
     assert row.passed, row.note
 
 
+def _unflatten(x: jax.Array) -> dict:
+    out, i = {}, 0
+    for p in MODEL.parameters:
+        k = math.prod(p.shape)
+        out[p.name] = x[i : i + k].reshape(p.shape)
+        i += k
+    return out
+
+
+@jax.jit
+def _jacobian_at(x: jax.Array, wi: jax.Array, wo: jax.Array) -> jax.Array:
+    """One compiled program for every parameter set (a closure per set recompiles)."""
+    return jax.jacfwd(lambda y: MODEL.eval(_unflatten(y), wi, wo))(x)
+
+
 def _flat_jacobian(params: dict, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
     """``d f / d theta`` by forward mode (as the fitter), every parameter scalar, float64."""
-    names = [p.name for p in MODEL.parameters]
-    sizes = [int(np.size(params[n])) for n in names]
-    flat = jnp.concatenate([jnp.ravel(jnp.asarray(params[n], float)) for n in names])
-
-    def f(x):
-        out, i = {}, 0
-        for n, k, p in zip(names, sizes, MODEL.parameters, strict=True):
-            out[n] = x[i : i + k].reshape(p.shape)
-            i += k
-        return MODEL.eval(out, wi, wo)
-
-    return np.asarray(jax.jit(jax.jacfwd(f))(flat))
+    flat = np.concatenate([np.ravel(np.asarray(params[p.name], float)) for p in MODEL.parameters])
+    return np.asarray(_jacobian_at(jnp.asarray(flat), jnp.asarray(wi), jnp.asarray(wo)))
 
 
 def test_forward_derivatives_finite_at_grazing_bounds_and_published_fits():
