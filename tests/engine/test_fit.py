@@ -87,7 +87,7 @@ def test_a_fit_that_runs_out_of_steps_is_not_converged(walter):
     assert isinstance(err.value.result, FitResult)
 
 
-@pytest.mark.parametrize("max_steps", [1, 2, 3])
+@pytest.mark.parametrize("max_steps", [1, 2, pytest.param(3, marks=pytest.mark.slow)])
 def test_a_fit_never_takes_more_lm_steps_than_max_steps(walter, max_steps):
     # max_steps counts tried LM steps, accepted or not (the old chunked fitter ran a
     # whole 8-step chunk, so max_steps=1 reported 8).

@@ -209,7 +209,12 @@ CASES = [
 ]
 
 
-@pytest.mark.parametrize(("options", "values"), CASES)
+@pytest.mark.parametrize(
+    ("options", "values"),
+    # the mpmath reference costs 9-17 s a parameter set: the first in the default suite,
+    # the others (f1 and p; the per-channel lobe) in benchmarks/slow_checks.sh
+    [pytest.param(*c, marks=pytest.mark.slow if i else ()) for i, c in enumerate(CASES)],
+)
 def test_matches_high_precision_reference(options, values):
     model = models.get("sgd", **options)
     params = model.defaults() | {k: jnp.asarray(v, float) for k, v in values.items()}

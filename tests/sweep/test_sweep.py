@@ -219,6 +219,7 @@ def test_unbalanced_model_lists_are_refused(text):
         models.split_specs(text)
 
 
+@pytest.mark.slow  # 16 s; resuming: test_killed_sweep_resumes_without_redoing_work
 def test_a_variant_is_fitted_resumed_and_ranked_as_its_own_model(tmp_path):
     mats = synthetic_materials(1)
     kw = dict(ARGS, jobs=1, progress=False)
