@@ -52,7 +52,9 @@ def test_positive_and_zero_below_horizon(case):
 
 
 @pytest.mark.parametrize("case", CASES, ids=IDS)
-@settings(max_examples=8, deadline=None)  # 8 draws x 63 rows
+# 4 draws x 88 rows (8 took 53 s of the suite): a term that is not symmetric in wi and wo
+# shows at any parameter value, and every option row is drawn
+@settings(max_examples=4, deadline=None)
 @given(seed=st.integers(0, 2**31 - 1))
 def test_reciprocity_under_random_parameters(case, seed):
     model, _ = case.build()

@@ -103,16 +103,13 @@ def test_a_fresh_process_fits_from_stored_programs_to_the_same_bits(tmp_path):
     fit_programs = {"shading_geometry", "select_one", "race", "natural_moments", "all_losses"}
     assert fit_programs <= stored, stored
 
+    # the second process finds every program stored, and one of them damaged: that one
+    # alone is exported again (a third process for the damage alone took 10 s)
+    damaged = next(p for p in (tmp_path).rglob("race-*.pkl"))
+    damaged.write_bytes(b"not a program")
     second = _run(tmp_path)
-    assert second["exported"] == 0, "a stored program was traced and exported again"
-    assert second["read"] == len(first["files"])
+    assert second["exported"] == 1, "an intact stored program was traced and exported again"
+    assert second["read"] == len(first["files"]) - 1
     assert second["files"] == first["files"]
     for key in ("loss", "params", "stderr"):
         assert second[key] == first[key], key
-
-    # a damaged file is exported again, with the same answer
-    damaged = next(p for p in (tmp_path).rglob("race-*.pkl"))
-    damaged.write_bytes(b"not a program")
-    third = _run(tmp_path)
-    assert third["exported"] == 1
-    assert third["loss"] == first["loss"]
