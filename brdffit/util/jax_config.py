@@ -38,7 +38,10 @@ def enable_compilation_cache(path: str | None = None) -> None:
     to share between processes at once (a sweep's Dask workers, pytest-xdist's): without
     a bound JAX writes an entry in place and reads without a lock, so a process could
     load another's half-written executable, on which XLA aborts; with one, every read
-    and write of the folder holds a file lock (``filelock``).
+    and write of the folder holds a file lock (``filelock``). A bounded cache keeps an
+    access-time file beside each entry, and JAX fails on every write into a folder
+    holding entries without one (as earlier brdffit versions' unbounded cache wrote), so
+    the bounded cache has a folder of its own (``-lru`` in its name).
     """
     path = path or os.environ.get("BRDFFIT_JAX_CACHE", "~/.cache/brdffit/jax")
     if path.lower() in ("off", "0", "none", ""):
@@ -66,4 +69,4 @@ def _host_tag() -> str:
     except metadata.PackageNotFoundError:
         jaxlib = "unknown"
     digest = hashlib.sha256(f"{platform.machine()}|{cpu}|{jaxlib}".encode()).hexdigest()
-    return f"{platform.machine()}-jaxlib{jaxlib}-{digest[:12]}"
+    return f"{platform.machine()}-jaxlib{jaxlib}-{digest[:12]}-lru"
