@@ -60,6 +60,7 @@ from typing import Any, Protocol, runtime_checkable
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jax import lax
 from jaxtyping import Array, Bool, Float, Int
 
@@ -122,12 +123,29 @@ class Reason(enum.IntEnum):
 
 @dataclass(frozen=True)
 class Tolerances:
-    """Stopping rule of :func:`solve` (module docstring); each relative and unitless."""
+    """Stopping rule of :func:`solve` (module docstring); each relative and unitless.
 
-    max_steps: int = 512
-    ftol: float = 1e-10
-    xtol: float = 1e-10
-    gtol: float = 1e-10
+    A pytree whose fields are numbers or 0-d arrays. As numbers they are constants of a
+    compiled descent, one program per value; :meth:`as_inputs` makes them inputs, so
+    that a fit with other tolerances or another step budget reuses the programs (a
+    default fit compiles for 5-8 s on a CPU)."""
+
+    max_steps: Any = 512
+    ftol: Any = 1e-10
+    xtol: Any = 1e-10
+    gtol: Any = 1e-10
+
+    def as_inputs(self) -> Tolerances:
+        """The same rule as 0-d arrays (int64 steps, float64 tolerances)."""
+        return Tolerances(
+            np.asarray(self.max_steps, np.int64),
+            *(np.asarray(v, np.float64) for v in (self.ftol, self.xtol, self.gtol)),
+        )
+
+
+jax.tree_util.register_dataclass(
+    Tolerances, data_fields=["max_steps", "ftol", "xtol", "gtol"], meta_fields=[]
+)
 
 
 class Descent(eqx.Module):
@@ -341,12 +359,24 @@ def rungs(n_starts: int, max_steps: int) -> tuple[tuple[int, int], ...]:
     (rounded up) go on with ``RUNG_GROWTH`` times the steps, until one is left or the
     budget reaches ``max_steps``; the last rung's starts descend until they stop.
     """
+    out = []
+    for keep, budget in _halving(n_starts):
+        if budget is None or budget >= max_steps:
+            return (*out, (keep, max_steps))
+        out.append((keep, budget))
+    raise AssertionError("the last rung of _halving has no budget")
+
+
+def _halving(n_starts: int) -> tuple[tuple[int, int | None], ...]:
+    """:func:`rungs` before the step budget: one start left at the end (``None``: until it
+    stops). The rungs after the one whose budget reaches ``max_steps`` change nothing (each
+    start they keep has stopped), so :func:`race` runs these, with the budgets capped by a
+    ``max_steps`` that is an input of the program, not a constant of it."""
     out, keep, budget = [], n_starts, RUNG_STEPS
-    while keep > 1 and budget < max_steps:
+    while keep > 1:
         out.append((keep, budget))
         keep, budget = -(-keep // RUNG_GROWTH), budget * RUNG_GROWTH
-    out.append((keep, max_steps))
-    return tuple(out)
+    return (*out, (keep, None))
 
 
 def race(
@@ -364,9 +394,10 @@ def race(
     advance ``batch`` at a time (:func:`batch_size`); a dropped one costs nothing on
     the CPU (one after another) and is masked in a vmapped batch.
     """
-    schedule = rungs(z0.shape[0], tol.max_steps)
+    schedule = _halving(z0.shape[0])
     keeps = jnp.asarray([k for k, _ in schedule])
-    budgets = jnp.asarray([b for _, b in schedule])
+    cap = jnp.asarray(tol.max_steps)
+    budgets = jnp.asarray([cap if b is None else jnp.minimum(b, cap) for _, b in schedule])
     size = None if batch is None else min(batch, z0.shape[0])
 
     def advance(s: Descent, go: Array, budget: Array) -> Descent:

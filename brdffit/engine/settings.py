@@ -74,4 +74,4 @@ class Settings:
 
     @property
     def tolerances(self) -> lm.Tolerances:
-        return lm.Tolerances(int(self.max_steps), self.ftol, self.xtol, self.gtol)
+        return lm.Tolerances(int(self.max_steps), self.ftol, self.xtol, self.gtol).as_inputs()

@@ -294,9 +294,8 @@ class _Search:
         self.bar = progress_bar(None, "simplify", "fit", False)  # simplify() sets the shown one
         self.frozen = set(full.frozen)
         self.robust, self.scale = full.robust, full.robust_scale or 1.0
-        defaults = lm.Tolerances()
-        self.tol = lm.Tolerances(*(kw.get(f.name, getattr(defaults, f.name))
-                                   for f in dataclasses.fields(lm.Tolerances)))  # fmt: skip
+        given = {f.name: kw[f.name] for f in dataclasses.fields(lm.Tolerances) if f.name in kw}
+        self.tol = lm.Tolerances(**given).as_inputs()
 
     def freeze_names(self, model: AbstractModel) -> list[str] | None:
         names = [p.name for p in model.parameters if p.name in self.frozen]

@@ -87,7 +87,7 @@ def test_a_fit_that_runs_out_of_steps_is_not_converged(walter):
     assert isinstance(err.value.result, FitResult)
 
 
-@pytest.mark.parametrize("max_steps", [1, 2, pytest.param(3, marks=pytest.mark.slow)])
+@pytest.mark.parametrize("max_steps", [1, 2, 3])
 def test_a_fit_never_takes_more_lm_steps_than_max_steps(walter, max_steps):
     # max_steps counts tried LM steps, accepted or not (the old chunked fitter ran a
     # whole 8-step chunk, so max_steps=1 reported 8).
@@ -335,5 +335,17 @@ def test_another_metric_on_another_sample_count_reuses_the_compiled_descents(wal
     with _compiled() as names:
         second = fit(walter, data, "ngan", cut_deg=78.0)
     assert first.converged and second.converged and second.n_data < first.n_data
+    solver = {"race", "select_one", "solve_one", "linear_start_one", "natural_moments"}
+    assert not solver & set(names), names
+
+
+def test_other_tolerances_and_step_budget_reuse_the_compiled_descents(walter):
+    # tolerances and max_steps are inputs of the compiled descents, not constants in them
+    data = synthesize(walter, TRUTH, stride=(9, 9, 9), noise_mult=0.02, seed=1)
+    first = fit(walter, data, "low_e2")
+    with _compiled() as names:
+        other = dict(max_steps=300, ftol=1e-9, xtol=1e-9, gtol=1e-9)
+        second = fit(walter, data, "low_e2", **other)
+    assert first.converged and second.converged
     solver = {"race", "select_one", "solve_one", "linear_start_one", "natural_moments"}
     assert not solver & set(names), names

@@ -206,5 +206,12 @@ def test_the_lowest_raced_start_descends_as_it_would_alone():
     np.testing.assert_allclose(float(d.cost[best]), float(alone.cost), rtol=1e-12)
     sched = lm.rungs(7, tol.max_steps)
     dropped = np.asarray(d.reason) == lm.Reason.RUNNING
+    # the budget as an input of the program (as fit passes it) runs the same schedule,
+    # also when it cuts the halving short (rungs(7, 20): 8 steps, then the best 3 to 20)
+    for t in (tol, lm.Tolerances(max_steps=20)):
+        static = lm.race_one(problem, z0, None, -inf, inf, t, None)
+        given = lm.race_one(problem, z0, None, -inf, inf, t.as_inputs(), None)
+        for a, b in zip(jax.tree.leaves(static), jax.tree.leaves(given), strict=True):
+            np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
     assert dropped.sum() >= 7 - sched[1][0]  # the first cut dropped 4 of 7
     assert np.all(np.asarray(d.steps)[dropped] <= sched[-2][1])
