@@ -2,7 +2,8 @@
 
 - ``metrics``: the fitting metrics: residual vectors, scalar losses, prepared data.
 - ``objective``: the least-squares objective: model, parameter layout, robust loss, frozen values.
-- ``lm``: bounded Levenberg-Marquardt as one jitted loop, and the start race.
+- ``lm``: bounded Levenberg-Marquardt as one jitted loop.
+- ``race``: the starts' descents raced by successive halving.
 - ``starts``: where a fit starts: screened, random and cross-metric candidates.
 - ``batch``: the batched descents: starts raced and finished, for many problems at once.
 - ``settings``: the keyword arguments of a fit, checked once.

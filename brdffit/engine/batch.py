@@ -18,7 +18,7 @@ import numpy as np
 from jax import lax
 
 from brdffit.core.result import Status
-from brdffit.engine import lm, starts
+from brdffit.engine import lm, race, starts
 from brdffit.engine import metrics as metrics_mod
 from brdffit.engine import objective as objective_mod
 from brdffit.engine.objective import Objective
@@ -170,7 +170,7 @@ class Engine:
         if z.shape[0] == 1:
             o = obj.with_robust(obj.robust, np.asarray(obj.scale)[0]) if obj.scale.ndim else obj
             if z.ndim == 3:
-                d = lm.race_one(o, z[0], preps[0], self.lo, self.hi, self.tol, batch)
+                d = race.race_one(o, z[0], preps[0], self.lo, self.hi, self.tol, batch)
             else:
                 d = lm.solve_one(o, z[0], preps[0], self.lo, self.hi, self.tol)
             return jax.tree.map(lambda a: np.asarray(a)[None], d)
@@ -219,7 +219,7 @@ def _solve_many(obj, z, prep, lo, hi, tol, batch):
         scale, zz, p = args
         o = obj.with_robust(obj.robust, scale) if per_scale else obj
         if zz.ndim == 2:
-            return lm.race(o, zz, p, lo, hi, tol, batch)
+            return race.race(o, zz, p, lo, hi, tol, batch)
         return lm.solve(o, zz, p, lo, hi, tol)
 
     scales = obj.scale if per_scale else jnp.zeros(z.shape[0])

@@ -4,7 +4,7 @@
 
 1. the candidates of :mod:`brdffit.engine.starts` (the cross-metric start among them) are
    descended by the bounded Levenberg-Marquardt of :mod:`brdffit.engine.lm`, raced by
-   successive halving in one compiled call (:func:`brdffit.engine.lm.race`), on evenly
+   successive halving in one compiled call (:func:`brdffit.engine.race.race`), on evenly
    thinned samples when the data are large (:func:`brdffit.engine.batch.coarse_size`);
 2. the lowest is finished on all samples;
 3. with a robust loss, its scale is set from the plain optimum's residuals, and the

@@ -17,7 +17,7 @@ The candidates, in order (every one with its affine parameters solved, see
 
 :func:`draws` makes the candidates (they depend on the seed only); :func:`select` solves
 their affine parameters on one problem's data and keeps the screen's cheapest.
-:func:`brdffit.fit` races their descents (successive halving, :func:`brdffit.engine.lm.race`;
+:func:`brdffit.fit` races their descents (successive halving, :func:`brdffit.engine.race.race`;
 one compiled solve) on thinned samples and finishes the best on all samples; the
 cross-metric start's candidates are raced the same way under the other metric.
 """

@@ -20,7 +20,7 @@ from hypothesis import strategies as st
 from scipy.optimize import least_squares
 
 from brdffit import Measurements, models, synthesize
-from brdffit.engine import lm, metrics
+from brdffit.engine import lm, metrics, race
 from brdffit.engine.objective import Objective, plain_residuals
 
 TRUTH = {"kd": [0.1, 0.2, 0.3], "ks": [0.8, 0.7, 0.9], "f0": [0.9, 0.6, 0.3], "alpha": 0.15}
@@ -179,13 +179,13 @@ def test_the_secant_update_meets_its_secant_condition(seed, k):
 @settings(max_examples=50, deadline=None)
 @given(st.integers(1, 40), st.integers(1, 600))
 def test_successive_halving_keeps_a_third_with_three_times_the_steps(n_starts, max_steps):
-    sched = lm.rungs(n_starts, max_steps)
+    sched = race.rungs(n_starts, max_steps)
     keeps, budgets = [k for k, _ in sched], [b for _, b in sched]
     assert keeps[0] == n_starts and budgets[-1] == max_steps
-    assert budgets[0] == (lm.RUNG_STEPS if len(sched) > 1 else max_steps)
+    assert budgets[0] == (race.RUNG_STEPS if len(sched) > 1 else max_steps)
     for (k0, b0), (k1, b1) in zip(sched, sched[1:], strict=False):
-        assert k1 == -(-k0 // lm.RUNG_GROWTH)
-        assert b1 == (lm.RUNG_GROWTH * b0 if b1 < max_steps else max_steps) and b1 > b0
+        assert k1 == -(-k0 // race.RUNG_GROWTH)
+        assert b1 == (race.RUNG_GROWTH * b0 if b1 < max_steps else max_steps) and b1 > b0
     # the race ends with one start, unless the step budget ran out first
     assert keeps[-1] == 1 or budgets[-1] == max_steps
 
@@ -198,19 +198,19 @@ def test_the_lowest_raced_start_descends_as_it_would_alone():
     z0 = jnp.asarray(np.array([25.0, 5.0, -5.0, -1.0]) + rng.normal(0, 10, (7, 4)))
     inf, tol = jnp.full(4, jnp.inf), lm.Tolerances()
     problem = _LeastSquares(_brown_dennis)
-    d = lm.race_one(problem, z0, None, -inf, inf, tol, None)
+    d = race.race_one(problem, z0, None, -inf, inf, tol, None)
     best = int(np.argmin(np.asarray(d.cost)))
     alone = lm.solve_one(problem, z0[best], None, -inf, inf, tol)
     assert lm.Reason(int(d.reason[best])).converged
     assert int(d.steps[best]) == int(alone.steps)
     np.testing.assert_allclose(float(d.cost[best]), float(alone.cost), rtol=1e-12)
-    sched = lm.rungs(7, tol.max_steps)
+    sched = race.rungs(7, tol.max_steps)
     dropped = np.asarray(d.reason) == lm.Reason.RUNNING
     # the budget as an input of the program (as fit passes it) runs the same schedule,
     # also when it cuts the halving short (rungs(7, 20): 8 steps, then the best 3 to 20)
     for t in (tol, lm.Tolerances(max_steps=20)):
-        static = lm.race_one(problem, z0, None, -inf, inf, t, None)
-        given = lm.race_one(problem, z0, None, -inf, inf, t.as_inputs(), None)
+        static = race.race_one(problem, z0, None, -inf, inf, t, None)
+        given = race.race_one(problem, z0, None, -inf, inf, t.as_inputs(), None)
         for a, b in zip(jax.tree.leaves(static), jax.tree.leaves(given), strict=True):
             np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
     assert dropped.sum() >= 7 - sched[1][0]  # the first cut dropped 4 of 7
