@@ -34,14 +34,22 @@ class AbstractModel(eqx.Module):
 
     Class attributes each model sets: ``name`` (registry key), ``reference`` (the
     paper), ``reciprocal`` (f(wi, wo) == f(wo, wi)), ``energy_conserving`` (directional
-    albedo <= 1 for every valid parameter value). ``isotropic`` follows an
-    ``anisotropic`` option where the model has one.
+    albedo <= 1 for every valid parameter value), ``channel_separable`` (below).
+    ``isotropic`` follows an ``anisotropic`` option where the model has one.
     """
 
     name: ClassVar[str]
     reference: ClassVar[str]
     reciprocal: ClassVar[bool] = True
     energy_conserving: ClassVar[bool] = True
+    channel_separable: ClassVar[bool] = False
+    """True when channel ``c`` of the value depends on an RGB parameter through its
+    element ``c`` alone (an albedo, an F0), on no other channel's: the solver then
+    computes the Jacobian with one forward pass per parameter, not per scalar
+    (:mod:`brdffit.engine.jacobian`). False (every column its own pass) is always correct;
+    a model that mixes channels (a tint divided by a luminance, a maximum over channels)
+    must leave it False for the options that mix them (a property then). Checked for
+    every row of the test cases, both ways."""
 
     @property
     def isotropic(self) -> bool:

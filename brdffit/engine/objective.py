@@ -33,13 +33,14 @@ from jaxtyping import Array, Float, Int
 from brdffit.core.abstract_model import AbstractModel
 from brdffit.core.parameters import Parameter, ParameterLayout, Params
 from brdffit.engine import metrics as metrics_mod
+from brdffit.engine.jacobian import Colouring, compressed, normal
 from brdffit.engine.metrics import Prepared
 from brdffit.errors import ParameterError
 from brdffit.util.programs import program
 
-GRAM_CHUNK = 65_536
-"""Residuals per chunk of :meth:`Objective.natural_block_moments`' Gram sums (65,536 x k^2
-floats, 50 MB for k = 10)."""
+GRAM_CHUNK = 16_384
+"""Samples per chunk of :meth:`Objective.natural_block_moments`' Gram sums (16,384 x 3 x
+P^2 floats for P tangents, 38 MB for P = 10)."""
 
 
 class Objective(eqx.Module):
@@ -101,26 +102,35 @@ class Objective(eqx.Module):
         r = metrics_mod.robust_residuals(self.residuals(z, prep), self.robust, self.scale)
         return 0.5 * jnp.sum(r * r)
 
+    @property
+    def colouring(self) -> Colouring:
+        """Which Jacobian columns share a forward-mode pass (:mod:`brdffit.engine.jacobian`)."""
+        return Colouring.of(self.free, self.model.channel_separable)
+
     def jacobian(
         self, z: Float[Array, " k"], prep: Prepared
     ) -> tuple[Float[Array, " m"], Float[Array, "m k"]]:
         """``(r, J)``: the plain residuals and their Jacobian in the solver space at ``z``.
 
-        Forward mode: one pass per free scalar, fewer than the residuals by five orders
-        of magnitude on MERL data.
+        Forward mode, one pass per colour of :attr:`colouring`: per free parameter of a
+        channel-separable model, per free scalar otherwise; the residuals outnumber
+        them by five orders of magnitude on MERL data.
         """
-        return _residuals_and_jacobian(self, z, prep)
+        r, _, b = compressed(lambda zz: (self.residuals(zz, prep), ()), z, self.colouring)
+        return r, self.colouring.dense(b)
 
     def linearize(
         self, z: Float[Array, " k"], prep: Prepared
     ) -> tuple[Float[Array, ""], Float[Array, " k"], Float[Array, "k k"]]:
-        """``(C, g, H)`` at ``z``: cost, gradient ``J^T W r`` and Gauss-Newton ``J^T W J``
-        (:meth:`jacobian`; ``J`` never leaves the device)."""
-        r, jac = self.jacobian(z, prep)
+        """``(C, g, H)`` at ``z``: cost, gradient ``J^T W r`` and Gauss-Newton ``J^T W J``,
+        from the compressed Jacobian (:func:`brdffit.engine.jacobian.normal`; ``J`` itself
+        is never formed)."""
+        col = self.colouring
+        r, _, b = compressed(lambda zz: (self.residuals(zz, prep), ()), z, col)
         w = metrics_mod.robust_weights(r, self.robust, self.scale)
         rr = metrics_mod.robust_residuals(r, self.robust, self.scale)
-        wj = jac * w[:, None]
-        return 0.5 * jnp.sum(rr * rr), wj.T @ r, wj.T @ jac
+        g, h = normal(b, w, r, col)
+        return 0.5 * jnp.sum(rr * rr), g, h
 
     def natural_moments(
         self, z: Float[Array, " k"], prep: Prepared
@@ -131,12 +141,17 @@ class Objective(eqx.Module):
         Jacobian with respect to the free natural parameters (the Gauss-Newton form of
         the M-estimator sandwich); ``r.r`` is the plain residuals' sum of squares.
         """
-        jac, e, r = self._natural_jacobian(z, prep)
-        # one pass over [J, diag(e) J]: its Gram matrix holds both (0.36 s against 0.46 s
-        # for two products at MERL's full resolution)
-        both = jnp.concatenate([jac, jac * e[:, None]], axis=1)
-        gram, k = both.T @ both, jac.shape[1]
-        return gram[:k, :k], gram[k:, k:], e @ e, r @ r
+        b, e, r = self._natural_compressed(z, prep)
+        # one pass over [B, diag(e) B]: its Gram matrices hold both
+        both = jnp.concatenate([b, b * e.reshape(b.shape[:2])[:, :, None]], axis=2)
+        gram, p = jnp.einsum("ncp,ncq->cpq", both, both), b.shape[2]
+        col = self.colouring
+        return (
+            col.spread_matrix(gram[:, :p, :p]),
+            col.spread_matrix(gram[:, p:, p:]),
+            e @ e,
+            r @ r,
+        )
 
     def block_moments(
         self, z: Float[Array, " k"], prep: Prepared, block: Int[Array, " n"], n_blocks: int
@@ -156,47 +171,38 @@ class Objective(eqx.Module):
         the score ``J_b^T e_b`` (b, k) and Gram matrix ``J_b^T J_b`` (b, k, k), whose sum
         over the blocks is ``J^T J``. ``block``: the block index (0..``n_blocks``-1) of
         each sample; its three residuals (RGB) go to the same block. The Gram matrices
-        are summed over chunks of :data:`GRAM_CHUNK` residuals, so memory stays at
-        ``GRAM_CHUNK k^2`` floats whatever the sample count.
+        are summed over chunks of :data:`GRAM_CHUNK` samples, so memory stays bounded
+        whatever the sample count.
         """
-        jac, e, r = self._natural_jacobian(z, prep)
-        ids = jnp.repeat(block, 3)  # residuals are sample-major: (n, 3).ravel()
-        scores = jax.ops.segment_sum(jac * e[:, None], ids, num_segments=n_blocks)
-        m, k = jac.shape
-        pad = -m % GRAM_CHUNK
-        jc = jnp.pad(jac, ((0, pad), (0, 0))).reshape(-1, GRAM_CHUNK, k)
-        ic = jnp.pad(ids, (0, pad), constant_values=n_blocks).reshape(-1, GRAM_CHUNK)
+        b, e, r = self._natural_compressed(z, prep)
+        n, _, p = b.shape
+        col = self.colouring
+        scores = jax.ops.segment_sum(b * e.reshape(n, 3)[:, :, None], block, n_blocks)
+        pad = -n % GRAM_CHUNK
+        bc = jnp.pad(b, ((0, pad), (0, 0), (0, 0))).reshape(-1, GRAM_CHUNK, 3, p)
+        ic = jnp.pad(block, (0, pad), constant_values=n_blocks).reshape(-1, GRAM_CHUNK)
 
         def add(acc: Array, chunk: tuple[Array, Array]) -> tuple[Array, None]:
-            j, i = chunk
-            outer = j[:, :, None] * j[:, None, :]
+            bb, i = chunk
+            outer = bb[:, :, :, None] * bb[:, :, None, :]
             return acc + jax.ops.segment_sum(outer, i, num_segments=n_blocks + 1), None
 
-        grams, _ = jax.lax.scan(add, jnp.zeros((n_blocks + 1, k, k), jac.dtype), (jc, ic))
-        grams = grams[:n_blocks]  # the last one collects the padding
-        return jnp.sum(grams, axis=0), r @ r, scores, grams
+        zero = jnp.zeros((n_blocks + 1, 3, p, p), b.dtype)
+        grams, _ = jax.lax.scan(add, zero, (bc, ic))
+        grams = col.spread_matrix(grams[:n_blocks])  # the last one collects the padding
+        return jnp.sum(grams, axis=0), r @ r, col.spread_vector(scores), grams
 
-    def _natural_jacobian(self, z: Array, prep: Prepared) -> tuple[Array, Array, Array]:
-        """``(J, e, r)``: the robust residuals' Jacobian in natural units, ``e`` and ``r``."""
+    def _natural_compressed(self, z: Array, prep: Prepared) -> tuple[Array, Array, Array]:
+        """``(B, e, r)``: the robust residuals' compressed Jacobian in natural units
+        (:func:`brdffit.engine.jacobian.compressed`), ``e`` and ``r``."""
         layout = self.layout
-        x = layout.from_solver(z)
 
-        def robust(xn: Array) -> tuple[Array, tuple[Array, Array]]:
+        def robust(xn: Array) -> tuple[Array, Array]:
             r = self.residuals(layout.to_solver(xn), prep)
-            e = metrics_mod.robust_residuals(r, self.robust, self.scale)
-            return e, (e, r)
+            return metrics_mod.robust_residuals(r, self.robust, self.scale), r
 
-        jac, (e, r) = jax.jacfwd(robust, has_aux=True)(x)
-        return jac, e, r
-
-
-def _residuals_and_jacobian(obj: Objective, z: Array, prep: Prepared) -> tuple[Array, Array]:
-    def f(zz: Array) -> tuple[Array, Array]:
-        r = obj.residuals(zz, prep)
-        return r, r
-
-    jac, r = jax.jacfwd(f, has_aux=True)(z)
-    return r, jac
+        e, r, b = compressed(robust, layout.from_solver(z), self.colouring)
+        return b, e, r
 
 
 @program

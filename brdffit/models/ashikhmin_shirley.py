@@ -119,6 +119,7 @@ class AshikhminShirley(AbstractModel):
     name: ClassVar[str] = "ashikhmin_shirley"
     reference: ClassVar[str] = "Ashikhmin, Shirley 2000, J. Graphics Tools 5(2)"
     energy_conserving: ClassVar[bool] = True  # the paper's coupled form; see the module text
+    channel_separable: ClassVar[bool] = True
 
     def __check_init__(self) -> None:
         if self.diffuse not in DIFFUSE:

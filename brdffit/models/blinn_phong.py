@@ -43,6 +43,7 @@ class BlinnPhong(AbstractModel):
         "Blinn 1977, Models of light reflection for computer synthesized pictures"
     )
     energy_conserving: ClassVar[bool] = False
+    channel_separable: ClassVar[bool] = True
 
     @property
     def parameters(self) -> tuple[Parameter, ...]:

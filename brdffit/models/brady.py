@@ -89,6 +89,7 @@ class Brady(AbstractModel):
     name: ClassVar[str] = "brady"
     reference: ClassVar[str] = "Brady, Lawrence, Peers, Weimer 2014, genBRDF, ACM TOG 33(4)"
     energy_conserving: ClassVar[bool] = False
+    channel_separable: ClassVar[bool] = True
 
     @property
     def parameters(self) -> tuple[Parameter, ...]:

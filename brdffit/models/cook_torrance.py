@@ -80,6 +80,7 @@ class CookTorrance(AbstractModel):
     name: ClassVar[str] = "cook_torrance"
     reference: ClassVar[str] = "Cook, Torrance 1982, A reflectance model for computer graphics"
     energy_conserving: ClassVar[bool] = False
+    channel_separable: ClassVar[bool] = True
 
     def __check_init__(self) -> None:
         if self.fresnel not in FRESNEL:

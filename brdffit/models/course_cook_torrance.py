@@ -63,6 +63,7 @@ class CourseCookTorrance(AbstractModel):
     name: ClassVar[str] = "course_cook_torrance"
     reference: ClassVar[str] = "Course notes after LearnOpenGL PBR Theory (de Vries), Karis 2013"
     energy_conserving: ClassVar[bool] = False
+    channel_separable: ClassVar[bool] = True
 
     @property
     def parameters(self) -> tuple[Parameter, ...]:

@@ -126,6 +126,13 @@ class Disney(AbstractModel):
     reference: ClassVar[str] = "Burley 2012, Physically-Based Shading at Disney, SIGGRAPH course"
     energy_conserving: ClassVar[bool] = False
 
+    @property
+    def channel_separable(self) -> bool:  # type: ignore[override]
+        """False while ``sheen`` or ``specular_tint`` is on: their tint ``C / C_lum``
+        divides by the luminance of ``base_color``, so every channel depends on all three
+        (:attr:`AbstractModel.channel_separable`)."""
+        return not (self.sheen or self.specular_tint)
+
     def __check_init__(self) -> None:
         for k, v in self.options().items():
             if not isinstance(v, bool):

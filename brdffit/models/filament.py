@@ -129,6 +129,7 @@ class Filament(AbstractModel):
     name: ClassVar[str] = "filament"
     reference: ClassVar[str] = "Google Filament, Physically Based Rendering in Filament (2018-)"
     energy_conserving: ClassVar[bool] = False
+    channel_separable: ClassVar[bool] = True
 
     def __check_init__(self) -> None:
         if self.shading not in ("standard", "cloth"):

@@ -203,6 +203,13 @@ class GltfPbr(AbstractModel):
     energy_conserving: ClassVar[bool] = False
 
     @property
+    def channel_separable(self) -> bool:  # type: ignore[override]
+        """False while ``specular`` is on: the dielectric's diffuse weight
+        ``1 - max_rgb(F_d)`` is a maximum over the channels of ``specular_f0``
+        (:attr:`AbstractModel.channel_separable`)."""
+        return not self.specular
+
+    @property
     def reciprocal(self) -> bool:  # type: ignore[override]
         return not self.clearcoat
 

@@ -219,6 +219,7 @@ class He(AbstractModel):
         "reflection (SIGGRAPH); as fitted by Ngan et al. 2005 (bbm NganHe)"
     )
     energy_conserving: ClassVar[bool] = False
+    channel_separable: ClassVar[bool] = True
 
     @property
     def parameters(self) -> tuple[Parameter, ...]:

@@ -92,6 +92,7 @@ class Kurt(AbstractModel):
     name: ClassVar[str] = "kurt"
     reference: ClassVar[str] = "Kurt, Szirmay-Kalos, Krivanek 2010, SIGGRAPH Comput. Graph. 44(1)"
     energy_conserving: ClassVar[bool] = False
+    channel_separable: ClassVar[bool] = True
 
     def __check_init__(self) -> None:
         if not isinstance(self.n_lobes, int) or isinstance(self.n_lobes, bool) or self.n_lobes < 1:

@@ -110,6 +110,7 @@ class Lafortune(AbstractModel):
     name: ClassVar[str] = "lafortune"
     reference: ClassVar[str] = "Lafortune, Foo, Torrance, Greenberg 1997, SIGGRAPH"
     energy_conserving: ClassVar[bool] = False
+    channel_separable: ClassVar[bool] = True
 
     def __check_init__(self) -> None:
         if not isinstance(self.n_lobes, int) or isinstance(self.n_lobes, bool) or self.n_lobes < 1:

@@ -29,6 +29,7 @@ class Lambert(AbstractModel):
 
     name: ClassVar[str] = "lambert"
     reference: ClassVar[str] = "Lambert 1760, Photometria"
+    channel_separable: ClassVar[bool] = True
 
     @property
     def parameters(self) -> tuple[Parameter, ...]:

@@ -152,6 +152,7 @@ class Low(AbstractModel):
     name: ClassVar[str] = "low"
     reference: ClassVar[str] = "Löw, Kronander, Ynnerman, Unger 2012, ACM TOG 31(1)"
     energy_conserving: ClassVar[bool] = False
+    channel_separable: ClassVar[bool] = True
 
     def __check_init__(self) -> None:
         if self.variant not in ("abc", "smooth"):

@@ -143,6 +143,12 @@ class MitsubaPrincipled(AbstractModel):
     )
     energy_conserving: ClassVar[bool] = False
 
+    @property
+    def channel_separable(self) -> bool:  # type: ignore[override]
+        """False while ``spec_tint`` or ``sheen_tint`` is on: ``C_tint = base_color / lum``
+        divides by the luminance of ``base_color`` (:attr:`AbstractModel.channel_separable`)."""
+        return not (self.spec_tint or self.sheen_tint)
+
     def __check_init__(self) -> None:
         for k, v in self.options().items():
             if not isinstance(v, bool):

@@ -94,6 +94,7 @@ class NishinoLombardi(AbstractModel):
     name: ClassVar[str] = "nishino_lombardi"
     reference: ClassVar[str] = "Nishino 2009, ICCV; Nishino, Lombardi 2011, JOSA A 28(1)"
     energy_conserving: ClassVar[bool] = False
+    channel_separable: ClassVar[bool] = True
 
     @property
     def parameters(self) -> tuple[Parameter, ...]:

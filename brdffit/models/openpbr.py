@@ -236,6 +236,13 @@ class OpenPbr(AbstractModel):
     reciprocal: ClassVar[bool] = False
     energy_conserving: ClassVar[bool] = False
 
+    @property
+    def channel_separable(self) -> bool:  # type: ignore[override]
+        """False while ``thin_film`` is on: the film's Fresnel mixes the channels of
+        ``base_color`` and ``specular_color`` (:func:`~brdffit.models._films.airy_fresnel`;
+        :attr:`AbstractModel.channel_separable`)."""
+        return not self.thin_film
+
     def __check_init__(self) -> None:
         for k, v in self.options().items():
             if not isinstance(v, bool):

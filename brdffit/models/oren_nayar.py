@@ -99,6 +99,7 @@ class OrenNayar(AbstractModel):
     name: ClassVar[str] = "oren_nayar"
     reference: ClassVar[str] = "Oren, Nayar 1994, Generalization of Lambert's reflectance model"
     energy_conserving: ClassVar[bool] = False
+    channel_separable: ClassVar[bool] = True
 
     def __check_init__(self) -> None:
         if self.variant not in ("qualitative", "full"):

@@ -66,6 +66,7 @@ class Phong(AbstractModel):
         "Lewis 1994, Making shaders more physically plausible (after Phong 1975)"
     )
     energy_conserving: ClassVar[bool] = False
+    channel_separable: ClassVar[bool] = True
 
     @property
     def parameters(self) -> tuple[Parameter, ...]:

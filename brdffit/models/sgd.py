@@ -290,6 +290,7 @@ class SGD(AbstractModel):
     name: ClassVar[str] = "sgd"
     reference: ClassVar[str] = "Bagher, Soler, Holzschuch 2012, CGF 31(4) (EGSR)"
     energy_conserving: ClassVar[bool] = False
+    channel_separable: ClassVar[bool] = True
 
     @property
     def parameters(self) -> tuple[Parameter, ...]:

@@ -186,6 +186,7 @@ class STD(AbstractModel):
     name: ClassVar[str] = "std"
     reference: ClassVar[str] = "Ribardière, Bringier, Meneveaux, Simonot 2017, CGF 36(2)"
     energy_conserving: ClassVar[bool] = False
+    channel_separable: ClassVar[bool] = True
 
     def __check_init__(self) -> None:
         if self.masking not in ("uncorrelated", "height_correlated"):

@@ -166,6 +166,7 @@ class Walter(AbstractModel):
     name: ClassVar[str] = "walter"
     reference: ClassVar[str] = "Walter, Marschner, Li, Torrance 2007, EGSR"
     energy_conserving: ClassVar[bool] = False
+    channel_separable: ClassVar[bool] = True
 
     def __check_init__(self) -> None:
         if self.distribution not in ("ggx", "beckmann"):

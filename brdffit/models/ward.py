@@ -95,6 +95,7 @@ class Ward(AbstractModel):
     name: ClassVar[str] = "ward"
     reference: ClassVar[str] = "Ward 1992, Measuring and modeling anisotropic reflection"
     energy_conserving: ClassVar[bool] = False
+    channel_separable: ClassVar[bool] = True
 
     def __check_init__(self) -> None:
         if self.normalization not in NORMALIZATIONS:
