@@ -28,6 +28,13 @@ from tests.models.test_openpbr_glsl import TOLERANCE, directions, relative_error
 from tests.references_openpbr import open_pbr_brdf
 
 ROWS = [c for c in CASES if c.model == "openpbr"]
+ENDS = [
+    pytest.param(c, id=c.id, marks=() if i in (0, len(ROWS) - 1) else pytest.mark.slow)
+    for i, c in enumerate(ROWS)
+]
+"""ROWS for the two comparisons with MaterialX: its base form and the row with every
+option on run in the default suite (5-11 s a row), the others in
+``benchmarks/slow_checks.sh``."""
 WI, WO = random_pairs(21, 3000)
 TOL = 1e-9
 """float64 on both sides; the model groups the same operations differently and uses
@@ -58,7 +65,7 @@ def floors_f82(params: dict) -> bool:
     return metal and bool(np.any(np.asarray(params["specular_color"]) < floor))
 
 
-@pytest.mark.parametrize("case", ROWS, ids=[c.id for c in ROWS])
+@pytest.mark.parametrize("case", ENDS)
 def test_matches_materialx_pointwise(case):
     """With ``negative_f82`` (MaterialX's metal Fresnel as it is) the model is MaterialX at
     every parameter set; without it, at every set where the floor does not act."""
@@ -74,7 +81,7 @@ def test_matches_materialx_pointwise(case):
     assert max(worst) < TOL and max(plain) < TOL and len(plain) >= 4
 
 
-@pytest.mark.parametrize("case", ROWS, ids=[c.id for c in ROWS])
+@pytest.mark.parametrize("case", ENDS)
 def test_matches_materialx_glsl(case):
     """The GLSL MaterialX generates, run on an OpenGL context (:mod:`tests.materialx_glsl`;
     skipped without one): float32 there, so the tolerance of ``test_openpbr_glsl``, 5e-5

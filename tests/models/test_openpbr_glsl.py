@@ -83,7 +83,15 @@ def relative_error(got: np.ndarray, ref: np.ndarray) -> float:
     return float(np.max(np.abs(got - ref) / scale))
 
 
-@pytest.mark.parametrize("name", CASES)
+FAST = ("default", "metal_f82_aniso", "all")
+"""Cases of the default suite: every feature is on in ``all``; the metal's F82 tint and
+anisotropy alone in ``metal_f82_aniso`` (2-3 s a case; ``benchmarks/slow_checks.sh``
+runs each feature alone)."""
+
+
+@pytest.mark.parametrize(
+    "name", [pytest.param(n, marks=() if n in FAST else pytest.mark.slow) for n in CASES]
+)
 def test_reference_interpreter_equals_materialx_glsl(name):
     context()
     wi, wo = directions()
