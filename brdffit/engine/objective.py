@@ -33,7 +33,7 @@ from jaxtyping import Array, Float, Int
 from brdffit.core.abstract_model import AbstractModel
 from brdffit.core.parameters import Parameter, ParameterLayout, Params
 from brdffit.engine import metrics as metrics_mod
-from brdffit.engine.jacobian import Colouring, compressed, normal
+from brdffit.engine.jacobian import Colouring, channel_grams, compressed, normal
 from brdffit.engine.metrics import Prepared
 from brdffit.errors import ParameterError
 from brdffit.util.programs import program
@@ -144,7 +144,7 @@ class Objective(eqx.Module):
         b, e, r = self._natural_compressed(z, prep)
         # one pass over [B, diag(e) B]: its Gram matrices hold both
         both = jnp.concatenate([b, b * e.reshape(b.shape[:2])[:, :, None]], axis=2)
-        gram, p = jnp.einsum("ncp,ncq->cpq", both, both), b.shape[2]
+        gram, p = channel_grams(both, both), b.shape[2]
         col = self.colouring
         return (
             col.spread_matrix(gram[:, :p, :p]),
