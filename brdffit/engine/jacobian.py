@@ -81,7 +81,7 @@ class Colouring:
         return out
 
     def mask(self, dtype) -> np.ndarray:
-        """``(3, k)``: 1 where column ``k`` acts on channel ``c``."""
+        """``(3, k)``: 1 where column ``j`` acts on channel ``c`` (row ``c``, column ``j``)."""
         channel = np.asarray(self.channel, int)
         rows = np.arange(CHANNELS)[:, None]
         return ((channel[None, :] == -1) | (channel[None, :] == rows)).astype(dtype)
