@@ -9,8 +9,8 @@ Reid's observation applies: columns with disjoint rows can share one directional
 derivative. One forward-mode pass along ``e_kd[r] + e_kd[g] + e_kd[b]`` gives all three
 (each row holds one of them, the others being zero there). So the Jacobian costs one
 tangent per *parameter*, not per scalar: 4 instead of 10 for walter (kd, ks, f0 RGB and
-a scalar alpha), which halved walter's linearisation at 300,000 samples (0.41 to 0.20 s
-on this project's 2-core box).
+a scalar alpha). Walter's linearisation at 303,470 samples took 0.20-0.27 s instead of
+0.41-0.61 s (this project's 2-core box, with other work running beside it).
 
 :class:`Colouring` says which columns share a tangent (their *colour*) and on which
 channel each acts. The compressed Jacobian ``B`` is ``(N, 3, colours)``: ``B[i, c, p]``
@@ -131,9 +131,10 @@ def channel_grams(a: Float[Array, "n 3 p"], b: Float[Array, "n 3 q"]) -> Float[A
     One matrix product of the ``(N, 3 p)`` and ``(N, 3 q)`` views, whose diagonal blocks
     are the channels' products (the off-diagonal ones, across channels, are dropped):
     three times the multiplications of a product per channel, but a plain GEMM over
-    contiguous rows. At 909,696 samples and ``p = q = 4`` it took 0.063 s on this
-    project's CPU against 0.150 s for the batched contraction over channels, whose
-    operands XLA transposes first."""
+    contiguous rows. The normal equations of :func:`normal` (Gram matrix and gradient)
+    at 909,696 samples and ``p = 4`` took 0.063 s this way on this project's CPU, against
+    0.150 s with the batched contraction over channels, whose operands XLA transposes
+    first."""
     n, c, p = a.shape
     q = b.shape[2]
     full = a.reshape(n, c * p).T @ b.reshape(n, c * q)

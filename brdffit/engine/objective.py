@@ -116,7 +116,7 @@ class Objective(eqx.Module):
         channel-separable model, per free scalar otherwise; the residuals outnumber
         them by five orders of magnitude on MERL data.
         """
-        r, _, b = compressed(lambda zz: (self.residuals(zz, prep), ()), z, self.colouring)
+        b, r = self._compressed(z, prep)
         return r, self.colouring.dense(b)
 
     def linearize(
@@ -125,11 +125,10 @@ class Objective(eqx.Module):
         """``(C, g, H)`` at ``z``: cost, gradient ``J^T W r`` and Gauss-Newton ``J^T W J``,
         from the compressed Jacobian (:func:`brdffit.engine.jacobian.normal`; ``J`` itself
         is never formed)."""
-        col = self.colouring
-        r, _, b = compressed(lambda zz: (self.residuals(zz, prep), ()), z, col)
+        b, r = self._compressed(z, prep)
         w = metrics_mod.robust_weights(r, self.robust, self.scale)
         rr = metrics_mod.robust_residuals(r, self.robust, self.scale)
-        g, h = normal(b, w, r, col)
+        g, h = normal(b, w, r, self.colouring)
         return 0.5 * jnp.sum(rr * rr), g, h
 
     def natural_moments(
@@ -191,6 +190,12 @@ class Objective(eqx.Module):
         grams, _ = jax.lax.scan(add, zero, (bc, ic))
         grams = col.spread_matrix(grams[:n_blocks])  # the last one collects the padding
         return jnp.sum(grams, axis=0), r @ r, col.spread_vector(scores), grams
+
+    def _compressed(self, z: Array, prep: Prepared) -> tuple[Array, Array]:
+        """``(B, r)``: the plain residuals' compressed Jacobian in the solver space
+        (:func:`brdffit.engine.jacobian.compressed`) and ``r``."""
+        r, _, b = compressed(lambda zz: (self.residuals(zz, prep), ()), z, self.colouring)
+        return b, r
 
     def _natural_compressed(self, z: Array, prep: Prepared) -> tuple[Array, Array, Array]:
         """``(B, e, r)``: the robust residuals' compressed Jacobian in natural units

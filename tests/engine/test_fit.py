@@ -65,16 +65,21 @@ def test_noisy_fit_within_three_standard_errors(walter):
 
 def test_frozen_parameters_leave_the_fit(walter):
     data = synthesize(walter, TRUTH, stride=GRID, noise_mult=0.02, seed=2)
-    # one start (screen=0): the frozen scalars are the subject, not the start policy
-    r = fit(walter, data, "low_e2", freeze={"alpha": 0.15}, n_restarts=0, screen=0)
-    assert r.converged and r.frozen == ("alpha",) and r.n_free == 9
+    # one start (screen=0): the frozen scalars are the subject, not the start policy. A
+    # scalar and an RGB parameter, frozen by value and then by name at their starts: one
+    # free set for both fits, so the second reuses the compiled descents (the frozen
+    # values are inputs of them; another free set compiled them again, 5 s)
+    f0 = [0.9, 0.6, 0.3]
+    r = fit(walter, data, "low_e2", freeze={"alpha": 0.15, "f0": f0}, n_restarts=0, screen=0)
+    assert r.converged and r.frozen == ("f0", "alpha") and r.n_free == 6
     assert float(r.params["alpha"]) == 0.15 and float(r.stderr["alpha"]) == 0.0
-    assert "alpha" not in r.labels and "(frozen)" in r.report()
-    # frozen by name at its start; the same free set, so the same compiled descents (the
-    # frozen values are inputs of them): f0 frozen instead compiled them again, 5 s
-    r2 = fit(walter, data, "low_e2", freeze=["alpha"], init={"alpha": 0.2}, n_restarts=0, screen=0)
-    assert float(r2.params["alpha"]) == 0.2 and r2.frozen == ("alpha",)
-    assert r2.loss > r.loss  # alpha held away from the truth's 0.15
+    np.testing.assert_array_equal(r.stderr["f0"], 0.0)
+    assert not {"alpha", "f0[r]", "f0[g]", "f0[b]"} & set(r.labels)
+    assert "(frozen)" in r.report()
+    init = {"alpha": 0.2, "f0": [0.8, 0.5, 0.2]}
+    r2 = fit(walter, data, "low_e2", freeze=["alpha", "f0"], init=init, n_restarts=0, screen=0)
+    assert float(r2.params["alpha"]) == 0.2 and r2.frozen == ("f0", "alpha")
+    np.testing.assert_array_equal(r2.params["f0"], [0.8, 0.5, 0.2])
     with pytest.raises(ParameterError, match="cannot freeze unknown parameter"):
         fit(walter, data, freeze={"roughness": 0.1})
 
