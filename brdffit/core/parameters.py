@@ -348,7 +348,9 @@ class ParameterLayout:
             log_lo, log_hi = np.log(np.where(log, lo, 1.0)), np.log(np.where(log, hi, 1.0))
         zlo, zhi = np.where(log, log_lo, lo), np.where(log, log_hi, hi)
         for i, j in self.pairs():
-            zlo[i], zhi[i] = np.log(lo[i] * lo[j]), np.log(hi[i] * hi[j])
+            # ln x_i + ln x_j, as solver_vector and to_solver form it: ln(x_i x_j) rounds
+            # differently, and a point on the bounds then fell 1 ulp outside the box
+            zlo[i], zhi[i] = np.log(lo[i]) + np.log(lo[j]), np.log(hi[i]) + np.log(hi[j])
             zlo[j], zhi[j] = 1.0 / hi[j], 1.0 / lo[j]
         return zlo, zhi
 
