@@ -7,6 +7,11 @@ the models are ranked by the metric as ``brdffit report`` ranks them
 (scipy), whether the best model is the same, how many of the top three agree, and the
 largest move of one model's rank.
 
+Each of the two may be a sweep folder or the folder ``brdffit report`` wrote for one
+(its ``per_material_<metric>.csv`` tables hold the same ranks), so a sweep whose fit
+files were not kept, like the stride sweep in ``benchmarks/results/sweep_nbrdf_s335``,
+can still be compared.
+
 Run: python3 benchmarks/compare_sweeps.py SWEEP_A SWEEP_B [--label-a stride] [--label-b full]
 
 Figures: benchmarks/results/sweep.md.
@@ -15,6 +20,8 @@ Figures: benchmarks/results/sweep.md.
 from __future__ import annotations
 
 import argparse
+import csv
+from pathlib import Path
 
 import numpy as np
 from scipy.stats import kendalltau
@@ -22,19 +29,45 @@ from scipy.stats import kendalltau
 from brdffit.selection.crossrank import matrices
 from brdffit.selection.sweep_results import load_sweep
 
+Ranks = dict[str, dict[str, dict[str, float]]]
+"""metric -> material -> model -> rank (1 best, ties shared)."""
+
+
+def ranks_of(folder: str) -> Ranks:
+    """The ranks of a sweep folder, or of a ``brdffit report`` folder's CSV tables."""
+    tables = sorted(Path(folder).glob("per_material_*.csv"))
+    if tables:
+        out: Ranks = {}
+        for path in tables:
+            metric = path.stem.removeprefix("per_material_")
+            with path.open(newline="") as f:
+                for row in csv.DictReader(f):
+                    out.setdefault(metric, {}).setdefault(row["material"], {})[row["model"]] = (
+                        float(row["rank"])
+                    )
+        return out
+    res = load_sweep(folder)
+    out = {}
+    for metric in res.metrics:
+        m = matrices(res, metric)
+        out[metric] = {
+            material: dict(zip(m.models, map(float, m.rank[i]), strict=True))
+            for i, material in enumerate(m.materials)
+        }
+    return out
+
 
 def compare(a_dir: str, b_dir: str) -> list[dict]:
-    """One row per (material, metric) in both sweeps (same models, in ``a``'s order)."""
-    a, b = load_sweep(a_dir), load_sweep(b_dir)
+    """One row per (material, metric) in both sweeps (the models both hold, in ``a``'s
+    order)."""
+    a, b = ranks_of(a_dir), ranks_of(b_dir)
     rows = []
-    for metric in [m for m in a.metrics if m in b.metrics]:
-        ma, mb = matrices(a, metric), matrices(b, metric)
-        models = [m for m in ma.models if m in mb.models]
-        ja = [ma.models.index(m) for m in models]
-        jb = [mb.models.index(m) for m in models]
-        for material in [m for m in ma.materials if m in mb.materials]:
-            ra = ma.rank[ma.materials.index(material), ja]
-            rb = mb.rank[mb.materials.index(material), jb]
+    for metric in [m for m in a if m in b]:
+        for material in [m for m in a[metric] if m in b[metric]]:
+            ma, mb = a[metric][material], b[metric][material]
+            models = [m for m in ma if m in mb]
+            ra = np.array([ma[m] for m in models])
+            rb = np.array([mb[m] for m in models])
             if not (np.isfinite(ra).all() and np.isfinite(rb).all()):
                 continue
             tau = kendalltau(ra, rb).statistic
@@ -53,6 +86,29 @@ def compare(a_dir: str, b_dir: str) -> list[dict]:
 
 def _top3(models: list[str], rank: np.ndarray) -> set[str]:
     return set(np.asarray(models)[np.argsort(rank, kind="stable")[:3]])
+
+
+def model_table(a_dir: str, b_dir: str, label_a: str, label_b: str) -> str:
+    """Markdown table per metric and model: mean rank and wins (rank 1, ties included)
+    over the materials both sweeps hold, in each sweep, ordered by ``b``'s mean rank."""
+    a, b = ranks_of(a_dir), ranks_of(b_dir)
+    out = [
+        f"| metric | model | mean rank ({label_a}) | mean rank ({label_b}) | change "
+        f"| wins ({label_a}) | wins ({label_b}) |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for metric in [m for m in a if m in b]:
+        materials = [m for m in a[metric] if m in b[metric]]
+        models = [m for m in a[metric][materials[0]] if m in b[metric][materials[0]]]
+        ra = np.array([[a[metric][t][m] for m in models] for t in materials])
+        rb = np.array([[b[metric][t][m] for m in models] for t in materials])
+        for j in np.argsort(rb.mean(axis=0), kind="stable"):
+            out.append(
+                f"| {metric} | {models[j]} | {ra[:, j].mean():.2f} | {rb[:, j].mean():.2f} "
+                f"| {rb[:, j].mean() - ra[:, j].mean():+.2f} | {int((ra[:, j] == 1).sum())} "
+                f"| {int((rb[:, j] == 1).sum())} |"
+            )
+    return "\n".join(out)
 
 
 def table(rows: list[dict], label_a: str, label_b: str) -> str:
@@ -76,9 +132,14 @@ def main() -> None:
     ap.add_argument("sweep_b")
     ap.add_argument("--label-a", default="A")
     ap.add_argument("--label-b", default="B")
+    ap.add_argument(
+        "--models-only", action="store_true", help="only the per-model table, not every pair"
+    )
     args = ap.parse_args()
     rows = compare(args.sweep_a, args.sweep_b)
-    print(table(rows, args.label_a, args.label_b))
+    if not args.models_only:
+        print(table(rows, args.label_a, args.label_b), end="\n\n")
+    print(model_table(args.sweep_a, args.sweep_b, args.label_a, args.label_b))
     taus = [r["tau"] for r in rows]
     same = sum(r["best_a"] == r["best_b"] for r in rows)
     print(
