@@ -29,27 +29,36 @@ over the box ``lo <= z <= hi``. Each iteration tries one step:
    skipped unless ``y.s > 0``. Which model makes the step: the
    Gauss-Newton one after an accepted step that lowered the cost by a fifth or more
    (Fletcher & Xu 1987, whose hybrid uses ``eps = 0.2``: Gauss-Newton is then
-   converging as on a small-residual problem); otherwise NL2SOL's adaptive rule, by
-   which the model changes only after a step it predicted poorly (``rho < 1/4``, the
-   trust-region threshold of Nocedal & Wright, Alg. 4.1) and only to the model whose
-   predicted reduction of that step was nearer the actual one. ``lambda`` grows after
-   every rejected step whatever the model, so two models that both fail cannot
-   alternate forever, and an augmented matrix that is not positive definite (Cholesky
-   fails) gives the Gauss-Newton step instead. Until Gauss-Newton slows down and
-   mispredicts a step that ``H + S`` predicts better, the descent is plain
-   Levenberg-Marquardt; the estimate costs k x k arithmetic, no evaluation of the model.
+   converging as on a small-residual problem); otherwise NL2SOL's adaptive rule: after
+   each tried step, the model whose predicted reduction of that step was nearer the
+   actual one. A model can be wrong either way: where ``S`` adds curvature, Gauss-Newton
+   overshoots (gain ``rho = 1 - c`` on a quadratic whose error shrinks by ``c`` a step);
+   where ``S`` takes curvature away, it undershoots, its step is accepted with
+   ``rho = 1 + c``, and the error shrinks only linearly (Disney on a measured paint at
+   full resolution: ``rho`` 1.61 on every step, 13 steps, against ``H + S``'s
+   ``rho`` 1.00 and 5 steps). So the rule is not kept for poor steps (``rho < 1/4``)
+   alone. ``lambda`` grows after every rejected step whatever the model, so two models
+   that both fail cannot alternate forever, and an augmented matrix that is not
+   positive definite (Cholesky fails) gives the Gauss-Newton step instead. While ``S``
+   is zero (no accepted step yet) both models predict the same and Gauss-Newton is
+   kept, so until Gauss-Newton slows down and ``H + S`` predicts a step better, the
+   descent is plain Levenberg-Marquardt; the estimate costs k x k arithmetic, no
+   evaluation of the model.
 
 It stops (:class:`Reason`) when the projected gradient is orthogonal to the residuals
 to ``gtol`` (MINPACK's test, scale-invariant: ``max_i |g_i| / (|J_i| |r|)``, binding
-scalars excluded, so this is the first-order Karush-Kuhn-Tucker condition), when an
-accepted step changes the cost by less than ``ftol`` relative both actually and as
-predicted (MINPACK), when a tried step is below ``xtol`` relative in Marquardt's
-scaled norm (MINPACK; scipy checks it on rejected steps too, which ends a descent
-whose every step is rounding), when the cost is exactly zero, or after ``max_steps``
-tried steps. Only an accepted step that stops on none of the step and cost tests
-costs a Jacobian at the new point. Everything is traced: the whole descent is one XLA
-while loop, and ``lax.map`` or ``jax.vmap`` over starts or data sets batches it; the
-starts' race by successive halving is :mod:`brdffit.engine.race`.
+scalars excluded, so this is the first-order Karush-Kuhn-Tucker condition), when a
+tried step changes the cost by less than ``ftol`` relative both actually (either way)
+and as predicted, with ``rho <= 2`` (MINPACK's ``lmder`` test, on rejected steps too:
+at a cost that rounding no longer lowers, a test on accepted steps alone let
+``lambda`` grow through eight rejected steps before the step test ended it), when a
+tried step is below ``xtol`` relative in Marquardt's scaled norm (MINPACK; scipy checks
+it on rejected steps too, which ends a descent whose every step is rounding), when the
+cost is exactly zero, or after ``max_steps`` tried steps. Only an accepted step that
+stops on none of the step and cost tests costs a Jacobian at the new point. Everything
+is traced: the whole descent is one XLA while loop, and ``lax.map`` or ``jax.vmap`` over
+starts or data sets batches it; the starts' race by successive halving is
+:mod:`brdffit.engine.race`.
 """
 
 from __future__ import annotations
@@ -265,17 +274,19 @@ def step(
     ok = jnp.isfinite(c_trial) & (predicted > 0) & (actual > 0)
     gain = jnp.where(ok, actual / jnp.where(predicted > 0, predicted, 1.0), 0.0)
     # the next step's model (item 5): Gauss-Newton after a fast accepted step (Fletcher
-    # and Xu); after a poorly predicted one, the model that predicted it better (NL2SOL)
+    # and Xu); otherwise the model that predicted this step better (NL2SOL)
     slow = jnp.where(ok, actual < FAST * s.cost, s.slow)
     nearer_aug = jnp.abs(actual - pred_aug) < jnp.abs(actual - pred_gn)
-    poor = (gain < 0.25) & jnp.isfinite(c_trial)
-    next_aug = slow & jnp.where(poor, nearer_aug, augmented)
+    next_aug = slow & jnp.where(jnp.isfinite(c_trial), nearer_aug, augmented)
     lam = jnp.where(ok, s.lam * jnp.maximum(1.0 / 3.0, 1.0 - (2.0 * gain - 1.0) ** 3), s.lam * s.nu)
     nu = jnp.where(ok, 2.0, 2.0 * s.nu)
 
     root = jnp.sqrt(s.d)
     small_x = jnp.linalg.norm(root * sz) <= tol.xtol * (tol.xtol + jnp.linalg.norm(root * s.z))
-    small_f = ok & (actual <= tol.ftol * s.cost) & (predicted <= tol.ftol * s.cost)
+    small_f = (
+        jnp.isfinite(c_trial) & (jnp.abs(actual) <= tol.ftol * s.cost)
+        & (predicted <= tol.ftol * s.cost) & (actual <= 2.0 * predicted)
+    )  # fmt: skip
 
     # the step and cost tests need no Jacobian at the trial: a descent that stops on
     # them keeps the last one (its gradient and Gauss-Newton matrix are those of the
