@@ -21,7 +21,7 @@ from brdffit import (
     models,
     synthesize,
 )
-from brdffit.engine.batch import _subset, coarse_size
+from brdffit.engine.batch import _subset, coarse_size, refine_size
 from brdffit.engine.fit import require_measurements
 from brdffit.engine.metrics import get_metric, prepare, prepare_all
 from brdffit.engine.objective import Objective
@@ -186,17 +186,22 @@ def test_a_robust_fit_under_ngan_ends_below_the_truths_own_robust_objective(walt
     assert j_fit <= j_truth * (1 + 1e-9), (j_fit, j_truth)
 
 
-def test_coarse_starts_then_all_samples_reach_the_same_optimum(walter):
-    data = synthesize(walter, TRUTH, stride=(9, 9, 9), noise_mult=0.05, seed=3)
+@pytest.mark.parametrize(("stride", "coarse"), [((9, 9, 9), 500), (GRID, 100)])
+def test_coarse_starts_then_all_samples_reach_the_same_optimum(walter, stride, coarse):
+    # 1,252 samples, starts on 500: straight to all of them; 7,288 samples, starts on
+    # 100: refined on 853 first (refine_size). Coarse to fine ends where the starts on
+    # all samples end.
+    data = synthesize(walter, TRUTH, stride=stride, noise_mult=0.05, seed=3)
     # n_restarts=0: the screened starts still race; `full` reuses the JSON test's program
     full = fit(walter, data, "low_e2", coarse=None, n_restarts=0)
-    thin = fit(walter, data, "low_e2", coarse=500, n_restarts=0)
-    assert full.coarse_samples == 0 and thin.coarse_samples == 500 and thin.coarse_steps > 0
+    thin = fit(walter, data, "low_e2", coarse=coarse, n_restarts=0)
+    assert full.coarse_samples == 0 and thin.coarse_samples == coarse and thin.coarse_steps > 0
+    assert refine_size(thin.n_samples, coarse) == {500: None, 100: 853}[coarse]
     assert thin.n_samples == full.n_samples and thin.converged
     assert thin.loss == pytest.approx(full.loss, rel=1e-9)
     for name in TRUTH:  # both stop at ftol = 1e-10 on the loss: ~1e-5 in parameters
         np.testing.assert_allclose(thin.params[name], full.params[name], rtol=1e-3)
-    assert "starts on 500 samples" in thin.report()
+    assert f"starts on {coarse} samples" in thin.report()
 
 
 def test_an_albedo_whose_optimum_is_zero_lands_on_its_bound_without_a_crawl(walter):
@@ -303,6 +308,23 @@ def test_thinned_starts_keep_each_metrics_own_values():
 )
 def test_the_starts_thin_mid_sized_data_to_a_quarter(n, coarse, want):
     assert coarse_size(n, coarse) == want
+
+
+@pytest.mark.parametrize(
+    ("n", "n_small", "want"),
+    [
+        (909_696, 8_000, 85_308),  # full MERL grid: 8,000 -> 85,308 -> all, x 10.7 each
+        (20_234, 5_058, None),  # stride 3 3 5: a factor 4 in all, no room for a stage
+        (130_000, 8_000, 32_249),  # just over 16 x 8,000: two factors of 4
+        (127_000, 8_000, None),  # just under
+        (1_252, 50, 250),
+        (1_252, 500, None),
+    ],
+)
+def test_a_stage_between_the_starts_and_all_samples_grows_the_data_evenly(n, n_small, want):
+    assert refine_size(n, n_small) == want
+    if want is not None:
+        assert want**2 <= n * n_small < (want + 1) ** 2
 
 
 def test_a_fit_on_mid_sized_data_runs_its_starts_on_a_quarter_of_the_samples(walter):
