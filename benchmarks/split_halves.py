@@ -46,8 +46,8 @@ from brdffit.core.measurements import Measurements
 from brdffit.engine import objective as objective_mod
 from brdffit.engine.block_errors import (
     block_cells,
+    block_chunks,
     block_covariance,
-    block_index,
     coverage_factor,
     effective_dof,
 )
@@ -103,8 +103,8 @@ def errors_at_optimum(model, data: Measurements, metric: str, block_deg: float) 
     cov = covariance(jtj[ix], meat[ix], float(ee), 3 * prep.n, "sandwich")[0]
     if cov is not None:
         out["sandwich"][act] = np.sqrt(np.diag(cov))
-    ids, g = block_index(prep, block_deg)
-    moments = objective_mod.natural_block_moments(obj, z, prep, jnp.asarray(ids), g)
+    chunks = block_chunks(prep, block_deg)
+    moments = objective_mod.natural_block_moments(obj, z, prep, chunks)
     jtj, _, scores, grams = (np.asarray(a) for a in moments)
     jtj, scores, grams = jtj[ix], scores[:, act], grams[:, act][:, :, act]
     for kind, power in (("CR1", 0.0), ("CR2", 0.5), ("CR3", 1.0)):

@@ -62,7 +62,7 @@ from brdffit.core.parameters import ParameterLayout, Params
 from brdffit.core.result import FitResult, Status
 from brdffit.core.result_terms import AT_BOUND_ATOL, AT_BOUND_RTOL
 from brdffit.engine import objective as objective_mod
-from brdffit.engine.block_errors import block_errors, block_index
+from brdffit.engine.block_errors import block_chunks, block_errors
 from brdffit.engine.metrics import Metric, Prepared
 from brdffit.engine.objective import Objective
 
@@ -204,8 +204,9 @@ def _free_covariance(
     ix = np.ix_(act, act)
     method, fallback = resolve(errors, synthetic), None
     if method == "blocks":
-        ids, n_blocks = block_index(prep)
-        moments = objective_mod.natural_block_moments(obj, z, prep, np.asarray(ids), n_blocks)
+        chunks = block_chunks(prep)
+        n_blocks = chunks.n_blocks
+        moments = objective_mod.natural_block_moments(obj, z, prep, chunks)
         jtj, rr, scores, grams = (np.asarray(a) for a in moments)
         cond, reason, weak = conditioning(jtj[ix])
         if reason is not None:

@@ -16,6 +16,7 @@ import pytest
 from brdffit import Measurements, ParameterError, fit_many, models, synthesize
 from brdffit.core.result_terms import BLOCK_DEG
 from brdffit.engine.block_errors import (
+    BlockChunks,
     block_covariance,
     block_index,
     coverage_factor,
@@ -94,7 +95,7 @@ def test_block_errors_equal_refits_leaving_each_block_out_for_a_linear_model():
     obj = Objective.build(model)
     z = jnp.asarray(obj.layout.solver_vector(r.params))
     jtj = np.asarray(natural_moments(obj, z, prep)[0])
-    scores, grams = (np.asarray(a) for a in block_moments(obj, z, prep, jnp.asarray(ids), g))
+    scores, grams = (np.asarray(a) for a in block_moments(obj, z, prep, BlockChunks.of(ids, g)))
     cr3, _ = block_covariance(jtj, scores, grams, power=1.0)
     cr2, _ = block_covariance(jtj, scores, grams)
     f = coverage_factor(effective_dof(jtj, grams))

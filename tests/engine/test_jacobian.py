@@ -11,7 +11,7 @@ import pytest
 from brdffit import models, synthesize
 from brdffit.core.geometry import shading_geometry
 from brdffit.engine import metrics as metrics_mod
-from brdffit.engine.block_errors import block_index
+from brdffit.engine.block_errors import BlockChunks, block_index
 from brdffit.engine.jacobian import Colouring
 from brdffit.engine.metrics import get_metric, prepare
 from brdffit.engine.objective import Objective
@@ -114,12 +114,13 @@ def test_jacobian_and_normal_equations_equal_plain_forward_mode(name, options):
     obj = Objective.build(model).with_robust("cauchy", 0.01)
     z = jnp.asarray(obj.layout.to_solver(obj.layout.join(truth))) * 1.01
     ids, n_blocks = block_index(prep)
+    chunks = BlockChunks.of(ids, n_blocks)
 
     @jax.jit
-    def both(z, prep, ids):
+    def both(z, prep, chunks):
         ours = (
             obj.jacobian(z, prep), obj.linearize(z, prep), obj.cost(z, prep),
-            obj.natural_moments(z, prep), obj.natural_block_moments(z, prep, ids, n_blocks),
+            obj.natural_moments(z, prep), obj.natural_block_moments(z, prep, chunks),
         )  # fmt: skip
         r = obj.residuals(z, prep)
         jac = jax.jacfwd(lambda zz: obj.residuals(zz, prep))(z)
@@ -133,7 +134,7 @@ def test_jacobian_and_normal_equations_equal_plain_forward_mode(name, options):
         return ours, (jac, (jac * w[:, None]).T @ r, (jac * w[:, None]).T @ jac,
                       jax.jacfwd(robust)(x), robust(x))  # fmt: skip
 
-    ours, (jac, g_ref, h_ref, jn, en) = jax.tree.map(np.asarray, both(z, prep, jnp.asarray(ids)))
+    ours, (jac, g_ref, h_ref, jn, en) = jax.tree.map(np.asarray, both(z, prep, chunks))
     (_, j_ours), (cost, g, h), cost_ref, (jtj, meat, ee, _), (jtj_b, _, scores, grams) = ours
     np.testing.assert_allclose(j_ours, jac, rtol=1e-13, atol=1e-13 * np.max(np.abs(jac)))
     np.testing.assert_allclose(cost, cost_ref, rtol=1e-14)
