@@ -268,7 +268,7 @@ def refine_size(n: int, n_small: int) -> int | None:
 
     The geometric mean ``sqrt(n_small n)``, so that both steps of the continuation grow
     the data by the same factor, when that factor is at least :data:`REFINE_RATIO` (a
-    MERL grid at full resolution, 909,696 samples after the 80-degree cut: 85,310
+    MERL grid at full resolution, 909,696 samples after the 80-degree cut: 85,308
     between 8,000 and all, a factor 10.7; a stride 3 3 5 grid, 20,234 samples raced on
     5,058: none). Started from the winner on the thinned samples, the descent on all
     samples closes the gap between two optima of the same model on different samples.
