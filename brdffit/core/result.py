@@ -65,7 +65,8 @@ class FitResult:
     down, :func:`brdffit.engine.uncertainty.unidentified`), ``coarse_samples`` /
     ``coarse_steps`` (the starts' thinned stage: its sample count, 0 when the starts
     ran on all samples, and its steps summed over starts, the descents under the other
-    metric for the extra start included;
+    metric for the extra start and the winner's refinement on more thinned samples
+    (:func:`brdffit.engine.batch.refine_size`) included;
     ``n_steps`` counts the winner's steps on all samples), ``robust`` /
     ``robust_scale`` (the robust loss and its scale in residual units, or None),
     ``error_blocks`` (the blocks of ``errors="blocks"``, else 0), ``error_dof`` (name ->
