@@ -158,6 +158,23 @@ def test_large_residual_problems_reach_the_published_minimum_without_crawling(fn
     assert int(d.steps) <= 100, int(d.steps)
 
 
+def test_an_undershooting_gauss_newton_model_gives_way_to_the_augmented_one():
+    # r = (z - 1, R - k z^2 / 2): the large second residual's curvature takes curvature
+    # away (S = -k R = -1/2 against J^T J ~ 1), so each Gauss-Newton step is accepted
+    # with a gain ratio near 1.5 and the error only halves a step; plain LM stops on the
+    # cost test 2e-5 short of the minimum after 15 steps. The minimum is the real root of
+    # k^2 z^3 / 2 + (1 - k R) z - 1 = 0 (the gradient).
+    big, k = 10.0, 0.05
+    roots = np.roots([0.5 * k * k, 0.0, 1.0 - k * big, -1.0])
+    z_star = float(roots[np.abs(roots.imag) < 1e-12].real[0])
+    fn = lambda z: jnp.array([z[0] - 1.0, big - 0.5 * k * z[0] ** 2])  # noqa: E731
+    inf = jnp.full(1, jnp.inf)
+    d = lm.solve_one(_LeastSquares(fn), jnp.zeros(1), None, -inf, inf, lm.Tolerances())
+    assert lm.Reason(int(d.reason)).converged
+    assert abs(float(d.z[0]) - z_star) <= 1e-7 * z_star, (float(d.z[0]), z_star)
+    assert int(d.steps) <= 8, int(d.steps)
+
+
 @settings(max_examples=30, deadline=None)
 @given(st.integers(0, 2**31 - 1), st.integers(1, 6))
 def test_the_secant_update_meets_its_secant_condition(seed, k):
