@@ -21,9 +21,9 @@ from brdffit import (
     models,
     synthesize,
 )
-from brdffit.engine.batch import _subset, coarse_size, refine_size
+from brdffit.engine.batch import Engine, _subset, coarse_size, refine_size
 from brdffit.engine.fit import require_measurements
-from brdffit.engine.metrics import get_metric, prepare, prepare_all
+from brdffit.engine.metrics import get_metric, prepare, prepare_all, shape_bucket
 from brdffit.engine.objective import Objective
 from brdffit.engine.settings import COARSE
 from tests.cases import CASES
@@ -80,6 +80,7 @@ def test_frozen_parameters_leave_the_fit(walter):
     r2 = fit(walter, data, "low_e2", freeze=["alpha", "f0"], init=init, n_restarts=0, screen=0)
     assert float(r2.params["alpha"]) == 0.2 and r2.frozen == ("f0", "alpha")
     np.testing.assert_array_equal(r2.params["f0"], [0.8, 0.5, 0.2])
+    assert r2.loss > r.loss  # alpha and f0 held away from the truth's 0.15 and f0
     with pytest.raises(ParameterError, match="cannot freeze unknown parameter"):
         fit(walter, data, freeze={"roughness": 0.1})
 
@@ -186,17 +187,30 @@ def test_a_robust_fit_under_ngan_ends_below_the_truths_own_robust_objective(walt
     assert j_fit <= j_truth * (1 + 1e-9), (j_fit, j_truth)
 
 
-@pytest.mark.parametrize(("stride", "coarse"), [((9, 9, 9), 500), (GRID, 100)])
-def test_coarse_starts_then_all_samples_reach_the_same_optimum(walter, stride, coarse):
-    # 1,252 samples, starts on 500: straight to all of them; 7,288 samples, starts on
-    # 100: refined on 853 first (refine_size). Coarse to fine ends where the starts on
-    # all samples end.
+@pytest.mark.parametrize(
+    ("stride", "coarse", "winner_on"), [((9, 9, 9), 500, [1_252]), (GRID, 100, [853, 7_288])]
+)
+def test_coarse_starts_then_all_samples_reach_the_same_optimum(
+    walter, stride, coarse, winner_on, monkeypatch
+):
+    # 1,252 samples, starts on 500: the winner goes straight to all of them; 7,288
+    # samples, starts on 100: it is refined on 853 first (refine_size). Coarse to fine
+    # ends where the starts on all samples end.
     data = synthesize(walter, TRUTH, stride=stride, noise_mult=0.05, seed=3)
     # n_restarts=0: the screened starts still race; `full` reuses the JSON test's program
     full = fit(walter, data, "low_e2", coarse=None, n_restarts=0)
+    single: list[int] = []  # padded sample counts of the one-start descents
+    descend = Engine._descend
+
+    def spy(self, obj, z, preps):
+        if np.ndim(z) == 2:
+            single.append(preps[0].n)
+        return descend(self, obj, z, preps)
+
+    monkeypatch.setattr(Engine, "_descend", spy)
     thin = fit(walter, data, "low_e2", coarse=coarse, n_restarts=0)
     assert full.coarse_samples == 0 and thin.coarse_samples == coarse and thin.coarse_steps > 0
-    assert refine_size(thin.n_samples, coarse) == {500: None, 100: 853}[coarse]
+    assert single == [shape_bucket(n) for n in winner_on]
     assert thin.n_samples == full.n_samples and thin.converged
     assert thin.loss == pytest.approx(full.loss, rel=1e-9)
     for name in TRUTH:  # both stop at ftol = 1e-10 on the loss: ~1e-5 in parameters
