@@ -33,13 +33,19 @@ COARSE_FLOOR = 2_000
 """Fewest thinned samples the starts descend on: the stress suite (2,000 random samples
 per case) recovers every identifiable case from that many."""
 
-COARSE_SHARE = 4
+COARSE_SHARE = 32
 """Below ``COARSE`` the starts see one sample in ``COARSE_SHARE`` (at least
-``COARSE_FLOOR``): some twenty start descents cost a descent on all samples or more, so
-on mid-sized data (a strided MERL grid, 5,000 to 100,000 samples) they, not the answer's
-descent, set the fit's time. Walter at 20,234 samples, warm: 1.36 s with the starts on
-all samples, 0.46 s on a quarter, 0.31 s on 2,000; the same final loss to 4e-16 in all
-three (``benchmarks/results/fit_lm.md``)."""
+``COARSE_FLOOR``), so that the start races cost about what the descent on all samples
+does: the two races take some 150 tried steps in all, the finishing descent 4 to 8
+(walter at 20,234 samples: 149 and 4), and a step's cost is about linear in the samples.
+At a quarter (the share before) the races set the fit's time on a strided MERL grid.
+On 25 NBRDF materials at stride 3 3 5 (20,234 samples: the starts on 2,000 instead of
+5,058), 18 models x 2 metrics, 900 fits (``benchmarks/coarse_race.py``,
+``benchmarks/results/fit_lm.md``): all converged both ways; 892 at the same minimum (to
+2.5e-7 relative), 6 lower (by up to 5%) and 2 higher (SGD on two fabrics under low_e2,
+by 2.4e-5 and 1.9e-4): another start won the race, as either way can happen on a
+landscape with several minima. The fits took 1.59x less time (most models 1.8-2.1x,
+SGD 1.25x)."""
 
 REFINE_RATIO = 4
 """Least ratio of sample counts between consecutive stages for :func:`refine_size` to add
@@ -270,8 +276,9 @@ def refine_size(n: int, n_small: int) -> int | None:
     the data by the same factor, when that factor is at least :data:`REFINE_RATIO` (a
     MERL grid at full resolution, 909,696 samples after the 80-degree cut: 85,308
     between 8,000 and all, a factor 10.7; a stride 3 3 5 grid, 20,234 samples raced on
-    5,058: none). Started from the winner on the thinned samples, the descent on all
-    samples closes the gap between two optima of the same model on different samples.
+    2,000: none, 6,361 would be a factor 3.2). Started from the winner on the thinned
+    samples, the descent on all samples closes the gap between two optima of the same
+    model on different samples.
     On three NBRDF materials at full resolution, 18 models x 2 metrics, the descents on
     all samples took 560 tried steps without this stage and 451 with it (STD on
     blue-metallic-paint under low_e2: 5 -> 3), each of its own steps costing a tenth

@@ -84,8 +84,9 @@ def fit(
       tuning constant (1.345 Huber, 2.385 Cauchy) times 1.4826 MAD of the plain
       optimum's residuals. The reported ``loss`` stays the metric's own value.
     - ``coarse``: the starts run on every k-th sample, at most ``coarse`` of them (and
-      at most a ``COARSE_SHARE``-th of the samples, but not under ``COARSE_FLOOR``), and
-      the best one is then finished on all samples (``None``: starts on all samples).
+      at most a ``COARSE_SHARE``-th, a 32nd, of the samples, but not under
+      ``COARSE_FLOOR``), and the best one is then finished on all samples (``None``:
+      starts on all samples).
       Data are thinned only when that at least halves them
       (:func:`brdffit.engine.batch.coarse_size`).
     - ``throw``: raise :class:`FitError` (carrying the result) if the fit did not converge.

@@ -27,7 +27,8 @@ four NBRDF materials at full resolution (chrome-steel, blue-metallic-paint,
 green-plastic, beige-fabric), 7 models (walter, cook_torrance, ward, blinn_phong, low,
 ashikhmin_shirley, sgd) x both metrics: every final loss equal to 5e-11 relative, the
 same statuses, the fits 19% faster in all (``benchmarks/results/fit_lm.md``). Data of
-fewer than 32,000 samples are thinned by ``COARSE_SHARE`` as before."""
+fewer than ``COARSE`` x ``COARSE_SHARE`` (256,000) samples are thinned by
+:data:`brdffit.engine.batch.COARSE_SHARE` instead."""
 
 
 @dataclass(frozen=True)

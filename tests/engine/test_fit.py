@@ -313,14 +313,15 @@ def test_thinned_starts_keep_each_metrics_own_values():
         (1_252, 25_000, None),  # small data: the starts see every sample
         (4_000, 25_000, None),  # the floor would not halve them
         (7_288, 25_000, 2_000),  # the floor
-        (20_234, 25_000, 5_058),  # a quarter
+        (20_234, 25_000, 2_000),  # stride 3 3 5: a 32nd would be under the floor
+        (100_000, 25_000, 3_125),  # a 32nd
         (909_696, 25_000, 25_000),  # full MERL grid: the cap
         (909_696, COARSE, 8_000),  # and the default's: a stride of 114 keeps every theta_h row
         (20_234, 1_000, 1_000),  # the caller's own cap wins
         (20_234, None, None),  # thinning off
     ],
 )
-def test_the_starts_thin_mid_sized_data_to_a_quarter(n, coarse, want):
+def test_the_starts_thin_mid_sized_data_to_a_32nd(n, coarse, want):
     assert coarse_size(n, coarse) == want
 
 
@@ -328,7 +329,7 @@ def test_the_starts_thin_mid_sized_data_to_a_quarter(n, coarse, want):
     ("n", "n_small", "want"),
     [
         (909_696, 8_000, 85_308),  # full MERL grid: 8,000 -> 85,308 -> all, x 10.7 each
-        (20_234, 5_058, None),  # stride 3 3 5: a factor 4 in all, no room for a stage
+        (20_234, 2_000, None),  # stride 3 3 5: a factor 10 in all, no room for two of 4
         (130_000, 8_000, 32_249),  # just over 16 x 8,000: two factors of 4
         (127_000, 8_000, None),  # just under
         (1_252, 50, 250),
@@ -341,7 +342,7 @@ def test_a_stage_between_the_starts_and_all_samples_grows_the_data_evenly(n, n_s
         assert want**2 <= n * n_small < (want + 1) ** 2
 
 
-def test_a_fit_on_mid_sized_data_runs_its_starts_on_a_quarter_of_the_samples(walter):
+def test_a_fit_on_mid_sized_data_runs_its_starts_on_thinned_samples(walter):
     # 7,288 samples: the starts descend on 2,000 of them, the answer on all, and it is
     # the answer of the starts run on every sample (same cost to 1e-9 relative).
     data = synthesize(walter, TRUTH, stride=GRID, noise_mult=0.02, seed=2)
