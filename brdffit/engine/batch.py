@@ -42,7 +42,7 @@ At a quarter (the share before) the races set the fit's time on a strided MERL g
 On 25 NBRDF materials at stride 3 3 5 (20,234 samples: the starts on 2,000 instead of
 5,058), 18 models x 2 metrics, 900 fits (``benchmarks/coarse_race.py``,
 ``benchmarks/results/fit_lm.md``): all converged both ways; 892 at the same minimum (to
-2.5e-7 relative), 6 lower (by up to 5%) and 2 higher (SGD on two fabrics under low_e2,
+2.5e-7 relative), 6 lower (by up to 5.4%) and 2 higher (SGD on two fabrics under low_e2,
 by 2.4e-5 and 1.9e-4): another start won the race, as either way can happen on a
 landscape with several minima. The fits took 1.59x less time (most models 1.8-2.1x,
 SGD 1.25x)."""
