@@ -11,7 +11,7 @@ name order. Used to move :data:`brdffit.engine.settings.COARSE` from 25,000 to 8
 and :data:`brdffit.engine.batch.COARSE_SHARE` (``benchmarks/results/fit_lm.md``).
 
     python -m benchmarks.coarse_race walter cook_torrance ... [--coarse 25000 8000]
-    python -m benchmarks.coarse_race walter ... --stride 3 3 5 --every 4 --coarse 5058 2023
+    python -m benchmarks.coarse_race walter ... --stride 3 3 5 --every 4 --coarse 5058 2000
 """
 
 from __future__ import annotations
@@ -23,19 +23,19 @@ import time
 
 import brdffit
 from benchmarks.full_resolution import MATERIALS, METRICS, NBRDF, cached
+from benchmarks.published_record import measurements
 from brdffit import fit, models
-from brdffit.io.load import load_measurements
 
 
 def _materials(args: argparse.Namespace) -> dict:
     """The data sets, by name: the full-resolution pickles, or the materials evaluated on
-    ``args.stride``."""
+    ``args.stride`` (pickled once per stride, as the published-record benchmark keeps them)."""
     if args.every is None and args.stride is None:
         return {m: pickle.loads(cached(m).read_bytes()) for m in MATERIALS}
     names = sorted(p.stem for p in NBRDF.glob("*.json"))
     names = names[:: args.every] if args.every else list(MATERIALS)
     stride = tuple(args.stride) if args.stride else (1, 1, 1)
-    return {m: load_measurements(NBRDF / f"{m}.json", stride=stride) for m in names}
+    return {m: measurements(m, stride) for m in names}
 
 
 def main() -> None:
