@@ -207,6 +207,7 @@ class Engine:
         out = []
         for i in range(z.shape[0]):
             r = np.asarray(objective_mod.plain_residuals(self.obj, z[i], preps[i]))
+            r = r[: 3 * preps[i].n]  # not the padding's
             mad = 1.4826 * float(np.median(np.abs(r - np.median(r))))
             spread = mad if mad > 0 else float(np.sqrt(np.mean(r * r)))
             out.append(metrics_mod.ROBUST_TUNING[self.s.robust] * max(spread, 1e-300))

@@ -36,9 +36,11 @@ correction divides by ``1 - l``, which float64 resolves to 1 in 4.5e15."""
 
 
 def block_cells(prep: Prepared, block_deg: float = BLOCK_DEG) -> tuple[np.ndarray, np.ndarray]:
-    """Each sample's block coordinates ``(floor(theta_h / deg), floor(theta_d / deg))``."""
-    th = np.degrees(np.arccos(np.clip(np.asarray(prep.g.cos_h), -1.0, 1.0)))
-    td = np.degrees(np.arccos(np.clip(np.asarray(prep.g.cos_d), -1.0, 1.0)))
+    """Each sample's block coordinates ``(floor(theta_h / deg), floor(theta_d / deg))``
+    (the padding rows after the samples left out)."""
+    n = prep.n
+    th = np.degrees(np.arccos(np.clip(np.asarray(prep.g.cos_h)[:n], -1.0, 1.0)))
+    td = np.degrees(np.arccos(np.clip(np.asarray(prep.g.cos_d)[:n], -1.0, 1.0)))
     return np.floor(th / block_deg).astype(int), np.floor(td / block_deg).astype(int)
 
 

@@ -137,17 +137,8 @@ class Objective(eqx.Module):
         Jacobian with respect to the free natural parameters (the Gauss-Newton form of
         the M-estimator sandwich); ``r.r`` is the plain residuals' sum of squares.
         """
-        b, e, r = self._natural_compressed(z, prep)
-        # one pass over [B, diag(e) B]: its Gram matrices hold both
-        both = jnp.concatenate([b, b * e.reshape(b.shape[:2])[:, :, None]], axis=2)
-        gram, p = channel_grams(both, both), b.shape[2]
-        col = self.colouring
-        return (
-            col.spread_matrix(gram[:, :p, :p]),
-            col.spread_matrix(gram[:, p:, p:]),
-            e @ e,
-            r @ r,
-        )
+        b, e, r, _ = self._natural_compressed(z, prep)
+        return self._moments(b, e, r)
 
     def block_moments(
         self, z: Float[Array, " k"], prep: Prepared, chunks: BlockChunks
@@ -173,7 +164,47 @@ class Objective(eqx.Module):
         full MERL grid against 0.48 s; walter 0.23 against 0.20 s). Memory: the rows of
         the chunks mapped at once.
         """
-        b, e, r = self._natural_compressed(z, prep)
+        b, e, r, _ = self._natural_compressed(z, prep)
+        return self._block_moments(b, e, r, chunks)
+
+    def answer(
+        self,
+        z: Float[Array, " k"],
+        prep: Prepared,
+        chunks: BlockChunks | None,
+        sides: dict[str, Prepared],
+    ) -> tuple[tuple[Array, ...], dict[str, Float[Array, ""]]]:
+        """What a result needs at the answer ``z``, from one pass over the data.
+
+        Returns ``(moments, losses)``: ``moments`` those of :meth:`natural_moments`
+        (``chunks`` None) or of :meth:`natural_block_moments`; ``losses`` every metric's
+        loss (:func:`brdffit.engine.metrics.loss`) of the model values that the same
+        Jacobian pass computes, name -> loss, on ``sides`` (the data prepared for each
+        metric, padded as ``prep`` is and sharing its geometry). One pass, not a
+        Jacobian for the covariance and a second evaluation for the losses: at the
+        full MERL grid each is a full pass over 2.7 million residuals.
+        """
+        b, e, r, f = self._natural_compressed(z, prep)
+        moments = self._moments(b, e, r) if chunks is None else self._block_moments(b, e, r, chunks)
+        return moments, metrics_mod.losses(f, prep.cos_i, sides)
+
+    def _moments(self, b: Array, e: Array, r: Array) -> tuple[Array, Array, Array, Array]:
+        """:meth:`natural_moments` from the compressed Jacobian ``b``, ``e`` and ``r``."""
+        # one pass over [B, diag(e) B]: its Gram matrices hold both
+        both = jnp.concatenate([b, b * e.reshape(b.shape[:2])[:, :, None]], axis=2)
+        gram, p = channel_grams(both, both), b.shape[2]
+        col = self.colouring
+        return (
+            col.spread_matrix(gram[:, :p, :p]),
+            col.spread_matrix(gram[:, p:, p:]),
+            e @ e,
+            r @ r,
+        )
+
+    def _block_moments(
+        self, b: Array, e: Array, r: Array, chunks: BlockChunks
+    ) -> tuple[Array, Array, Array, Array]:
+        """:meth:`natural_block_moments` from the compressed Jacobian ``b``, ``e`` and ``r``."""
         n, _, p = b.shape
         col = self.colouring
         b0 = jnp.concatenate([b, jnp.zeros((1, 3, p), b.dtype)])  # row n pads short chunks
@@ -194,17 +225,19 @@ class Objective(eqx.Module):
         r, _, b = compressed(lambda zz: (self.residuals(zz, prep), ()), z, self.colouring)
         return b, r
 
-    def _natural_compressed(self, z: Array, prep: Prepared) -> tuple[Array, Array, Array]:
-        """``(B, e, r)``: the robust residuals' compressed Jacobian in natural units
-        (:func:`brdffit.engine.jacobian.compressed`), ``e`` and ``r``."""
+    def _natural_compressed(self, z: Array, prep: Prepared) -> tuple[Array, Array, Array, Array]:
+        """``(B, e, r, f)``: the robust residuals' compressed Jacobian in natural units
+        (:func:`brdffit.engine.jacobian.compressed`), ``e``, ``r`` and the model's
+        values ``f`` (N, 3) at ``z``."""
         layout = self.layout
 
-        def robust(xn: Array) -> tuple[Array, Array]:
-            r = self.residuals(layout.to_solver(xn), prep)
-            return metrics_mod.robust_residuals(r, self.robust, self.scale), r
+        def robust(xn: Array) -> tuple[Array, tuple[Array, Array]]:
+            f = self.model.evaluate(self.params(layout.to_solver(xn)), prep.g)
+            r = metrics_mod.residuals(f, prep)
+            return metrics_mod.robust_residuals(r, self.robust, self.scale), (r, f)
 
-        e, r, b = compressed(robust, layout.from_solver(z), self.colouring)
-        return b, e, r
+        e, (r, f), b = compressed(robust, layout.from_solver(z), self.colouring)
+        return b, e, r, f
 
 
 @program
@@ -238,10 +271,9 @@ def natural_block_moments(obj: Objective, z: Array, prep: Prepared, chunks: Bloc
 
 
 @program
-def all_losses(model: AbstractModel, params: Params, preps: dict[str, Prepared]):
-    """Every metric's loss at ``params``; the model is evaluated once (shared geometry)."""
-    f = model.evaluate(params, next(iter(preps.values())).g)
-    return {k: metrics_mod.loss(f, p) for k, p in preps.items()}
+def answer(obj: Objective, z: Array, prep: Prepared, chunks: BlockChunks | None, sides: dict):
+    """Jitted :meth:`Objective.answer`."""
+    return obj.answer(z, prep, chunks, sides)
 
 
 def start_params(model: AbstractModel, init: Mapping[str, object] | None) -> Params:

@@ -147,7 +147,7 @@ def _factor(prep, f_model, relative: bool):
 def _noise_scales(prep, f_model, noise: str) -> tuple[jax.Array, tuple[str, ...]]:
     """Per-residual factors (k, residuals) of the ``noise`` model's scales, and their labels."""
     if noise == "constant":
-        return jnp.ones((1, 3 * prep.n)), ("log_sigma",)
+        return jnp.ones((1, 3 * prep.rows)), ("log_sigma",)
     add = _factor(prep, f_model, False) if noise in ("additive", "mixed") else None
     mult = _factor(prep, f_model, True) if noise in ("multiplicative", "mixed") else None
     if noise == "mixed":

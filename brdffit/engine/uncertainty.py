@@ -62,7 +62,7 @@ from brdffit.core.parameters import ParameterLayout, Params
 from brdffit.core.result import FitResult, Status
 from brdffit.core.result_terms import AT_BOUND_ATOL, AT_BOUND_RTOL
 from brdffit.engine import objective as objective_mod
-from brdffit.engine.block_errors import block_chunks, block_errors
+from brdffit.engine.block_errors import BlockChunks, block_chunks, block_errors
 from brdffit.engine.metrics import Metric, Prepared
 from brdffit.engine.objective import Objective
 
@@ -192,21 +192,22 @@ class _Errors:
 def _free_covariance(
     obj: Objective,
     z: np.ndarray,
-    prep: Prepared,
     padded: Prepared,
     act: np.ndarray,
     errors: str,
-    synthetic: bool,
+    method: str,
+    chunks: BlockChunks | None,
+    moments: tuple,
+    n_data: int,
 ) -> _Errors:
-    """Covariance of the scalars not held on a bound (``act``) by ``errors`` (``padded``:
-    ``prep`` padded, for the sums that padding leaves unchanged; ``synthetic``: the data
-    are a model's values, for ``"auto"``, module docstring)."""
+    """Covariance of the scalars not held on a bound (``act``) by ``method`` (``errors``
+    resolved, :func:`resolve`) from the ``moments`` at the answer ``z``
+    (:meth:`~brdffit.engine.objective.Objective.answer` on ``padded``: block moments where
+    ``chunks`` are given, else the sandwich's); ``n_data`` the residuals not padding."""
     ix = np.ix_(act, act)
-    method, fallback = resolve(errors, synthetic), None
-    if method == "blocks":
-        chunks = block_chunks(prep)
+    fallback = None
+    if chunks is not None:
         n_blocks = chunks.n_blocks
-        moments = objective_mod.natural_block_moments(obj, z, prep, chunks)
         jtj, rr, scores, grams = (np.asarray(a) for a in moments)
         cond, reason, weak = conditioning(jtj[ix])
         if reason is not None:
@@ -216,9 +217,9 @@ def _free_covariance(
         if cov is not None or errors != "auto":
             return _Errors(cov, cond, reason, weak, float(rr), method, n_blocks, dof)
         method, fallback = "sandwich", reason
-    moments = objective_mod.natural_moments(obj, z, padded)
+        moments = objective_mod.natural_moments(obj, z, padded)
     jtj, meat, ee, rr = (np.asarray(a) for a in moments)
-    cov, cond, reason, weak = covariance(jtj[ix], meat[ix], float(ee), 3 * prep.n, method)
+    cov, cond, reason, weak = covariance(jtj[ix], meat[ix], float(ee), n_data, method)
     return _Errors(cov, cond, reason, weak, float(rr), method, fallback=fallback)
 
 
@@ -240,9 +241,11 @@ def assemble(
     ``preps[m.name]`` :meth:`~brdffit.engine.metrics.Prepared.padded`, made here if not given;
     ``errors`` a kind of :data:`CHOICES`, ``synthetic`` whether the data are a model's values).
 
-    The other metrics are padded only for their losses, at the end, sharing ``padded``'s
-    geometry: padding every metric at the start of a fit held 3 more copies of the data
-    side through the descent (SGD at full resolution: 4.3 GB peak, 3.8 GB without them)."""
+    The covariance's moments and every metric's loss come from one pass over the data at
+    the answer (:meth:`~brdffit.engine.objective.Objective.answer`). The other metrics
+    are padded only for their losses, at the end, sharing ``padded``'s geometry: padding
+    every metric at the start of a fit held 3 more copies of the data side through the
+    descent (SGD at full resolution: 4.3 GB peak, 3.8 GB without them)."""
     layout, model = obj.layout, obj.model
     prep = preps[m.name]
     padded = prep.padded() if padded is None else padded
@@ -252,9 +255,16 @@ def assemble(
     cond, reason, weak_names, rss = float("nan"), None, [], float("nan")
     n_data, n_blocks, fallback = 3 * prep.n, 0, None
     method = resolve(errors, synthetic)
-    if out.status is not Status.NONFINITE:
+    ok = out.status is not Status.NONFINITE
+    chunks = block_chunks(prep) if ok and method == "blocks" else None
+    # the other metrics as padded as ``padded`` (from prepare_all they are; data padded
+    # here are let go: kept, their copies would be held through every later descent)
+    sides = {k: padded if k == m.name else p.pad(padded.rows, padded) for k, p in preps.items()}
+    moments, losses = objective_mod.answer(obj, z, padded, chunks, sides)
+    losses = {k: float(v) for k, v in losses.items()}
+    if ok:
         act = ~out.binding
-        e = _free_covariance(obj, z, prep, padded, act, errors, synthetic)
+        e = _free_covariance(obj, z, padded, act, errors, method, chunks, moments, n_data)
         cond, reason, method = e.cond, e.reason, e.method
         n_blocks, fallback = e.n_blocks, e.fallback
         rss = max(e.rr, 1e-300)
@@ -284,10 +294,6 @@ def assemble(
     finite = math.isfinite(rss)
     aic = n_data * math.log(rss / n_data) + 2 * k if finite else float("nan")
     bic = n_data * math.log(rss / n_data) + k * math.log(n_data) if finite else float("nan")
-    # padded here and let go (pad, not the kept ``padded``): kept, the other metrics'
-    # copies would be held through every later descent on these data
-    every = {k: padded if k == m.name else p.pad(padded.n, padded) for k, p in preps.items()}
-    losses = {k: float(v) for k, v in objective_mod.all_losses(model, params, every).items()}
     at_bound = _at_bound(layout, params, out.binding)
     return FitResult(
         model=model.name,

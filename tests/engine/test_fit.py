@@ -204,7 +204,7 @@ def test_coarse_starts_then_all_samples_reach_the_same_optimum(
 
     def spy(self, obj, z, preps):
         if np.ndim(z) == 2:
-            single.append(preps[0].n)
+            single.append(preps[0].rows)
         return descend(self, obj, z, preps)
 
     monkeypatch.setattr(Engine, "_descend", spy)
@@ -379,7 +379,7 @@ def test_another_metric_on_another_sample_count_reuses_the_compiled_descents(wal
     with _compiled() as names:
         second = fit(walter, data, "ngan", cut_deg=78.0)
     assert first.converged and second.converged and second.n_data < first.n_data
-    solver = {"race", "select_one", "solve_one", "linear_start_one", "natural_moments"}
+    solver = {"race", "select_one", "solve_one", "linear_start_one", "answer"}
     assert not solver & set(names), names
 
 
@@ -391,5 +391,5 @@ def test_other_tolerances_and_step_budget_reuse_the_compiled_descents(walter):
         other = dict(max_steps=300, ftol=1e-9, xtol=1e-9, gtol=1e-9)
         second = fit(walter, data, "low_e2", **other)
     assert first.converged and second.converged
-    solver = {"race", "select_one", "solve_one", "linear_start_one", "natural_moments"}
+    solver = {"race", "select_one", "solve_one", "linear_start_one", "answer"}
     assert not solver & set(names), names

@@ -106,4 +106,27 @@ def test_padded_rows_add_nothing_to_residuals_or_loss(name):
     np.testing.assert_array_equal(r_big[: r.size], r)
     assert np.all(np.asarray(r_big[r.size :]) == 0.0)
     np.testing.assert_allclose(metrics.loss(f_big, big), metrics.loss(f, prep), rtol=1e-14)
-    assert big.n == prep.n + 37 and prep.padded().n == metrics.shape_bucket(prep.n)
+    assert big.rows == prep.rows + 37 and big.n == prep.n
+    assert prep.padded().rows == metrics.shape_bucket(prep.n) and prep.padded().n == prep.n
+
+
+@pytest.mark.parametrize("name", sorted(metrics.METRICS))
+def test_prepare_all_pads_once_and_its_samples_are_prepare_s(name):
+    # 289 samples: padded to 304 (shape_bucket); the rows before the padding are what
+    # prepare gives, and the padding changes neither residuals nor loss
+    data, fm = _data(3)
+    prep = metrics.prepare(data, metrics.get_metric(name))
+    every = metrics.prepare_all(data)
+    padded = every[name]
+    assert padded.n == prep.n and padded.rows == metrics.shape_bucket(prep.n) > prep.n
+    assert padded.padded() is padded
+    for field in ("cos_i", "target", "weight", "values"):
+        np.testing.assert_array_equal(np.asarray(getattr(padded, field))[: prep.n],
+                                      np.asarray(getattr(prep, field)))  # fmt: skip
+    assert not np.any(np.asarray(padded.weight)[prep.n :])
+    f = fm[metrics.keep_mask(data, 80.0)]
+    f_big = jnp.asarray(np.concatenate([f, np.repeat(f[:1], padded.rows - prep.n, 0)]))
+    np.testing.assert_allclose(metrics.loss(f_big, padded), metrics.loss(jnp.asarray(f), prep),
+                               rtol=1e-14)  # fmt: skip
+    np.testing.assert_allclose(metrics.losses(f_big, padded.cos_i, every)[name],
+                               metrics.loss(jnp.asarray(f), prep), rtol=1e-14)  # fmt: skip

@@ -100,7 +100,7 @@ def test_a_fresh_process_fits_from_stored_programs_to_the_same_bits(tmp_path):
     # bounded, so JAX locks the folder: processes sharing it never read a half-written file
     assert first["max_size"] == CACHE_MAX_BYTES
     stored = set(first["files"])
-    fit_programs = {"shading_geometry", "select_one", "race", "natural_moments", "all_losses"}
+    fit_programs = {"shading_geometry", "select_one", "race", "answer"}
     assert fit_programs <= stored, stored
 
     # the second process finds every program stored, and one of them damaged: that one
