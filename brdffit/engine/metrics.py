@@ -351,9 +351,30 @@ def differences(f_model: Array, prep: Prepared) -> Array:
 
 
 def residuals(f_model: Array, prep: Prepared) -> Array:
-    """The flat residual vector LM minimises (``0.5 sum r^2``), length 3N."""
-    e = lax.cond(prep.l1, _pseudo_huber, lambda v: v, differences(f_model, prep))
-    return (jnp.sqrt(prep.weight) * e).ravel()
+    """The flat residual vector LM minimises (``0.5 sum r^2``), length 3N.
+
+    One branch per form of metric (``prep.log1p``, ``prep.l1``), each computing the whole
+    residual ``sqrt(w) rho(T(f cos) - T(f_data cos))``: XLA fuses a branch into one pass
+    over the samples, where a conditional per switch materialises every intermediate
+    array between them (Lambert's residuals on the full MERL grid: 25-32 ms against
+    37-44 ms, its compressed Jacobian 49-60 ms against 64-78 ms)."""
+    form = prep.log1p.astype(jnp.int32) + 2 * prep.l1.astype(jnp.int32)
+    return lax.switch(form, _RESIDUALS, f_model, prep)
+
+
+def _residuals_of(log1p: bool, l1: bool):
+    """:func:`residuals` of one form of metric, its switches known while tracing."""
+
+    def residuals(f_model: Array, prep: Prepared) -> Array:
+        x = f_model * prep.cos_i[:, None]
+        e = (_log_side(x) if log1p else x) - prep.target
+        return (jnp.sqrt(prep.weight) * (_pseudo_huber(e) if l1 else e)).ravel()
+
+    return residuals
+
+
+_RESIDUALS = [_residuals_of(log1p, l1) for l1 in (False, True) for log1p in (False, True)]
+"""The four forms, indexed by ``log1p + 2 l1``."""
 
 
 def _log_side(x: Array) -> Array:

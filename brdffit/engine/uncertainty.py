@@ -44,10 +44,12 @@ and ``"sandwich"`` for synthetic data (:attr:`~brdffit.core.measurements.Measure
 a model's own values plus independent noise have no model error to admit), and
 ``"sandwich"`` where the data have too few blocks for ``"blocks"`` (the result says so).
 
-Only k x k matrices (``J^T J`` and ``J^T diag(r^2) J``, formed on the device by
-:meth:`brdffit.engine.objective.Objective.natural_moments`; for ``"blocks"``, ``J^T J`` and
-the blocks' scores and Gram matrices, from one Jacobian by
-:meth:`~brdffit.engine.objective.Objective.natural_block_moments`) reach numpy.
+Only k x k matrices (``J^T J`` and ``J^T diag(r^2) J``; for ``"blocks"``, ``J^T J`` and
+the blocks' scores and Gram matrices) reach numpy. They are formed on the device by
+:meth:`brdffit.engine.objective.Objective.answer`, from one Jacobian pass at the answer
+that also gives every metric's loss: the descent's last linearisation is not at the
+answer (a descent that stops after an accepted step does not linearise there again), and
+the sandwich and the blocks need sums the descent does not keep.
 """
 
 from __future__ import annotations
