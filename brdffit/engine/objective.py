@@ -178,9 +178,9 @@ class Objective(eqx.Module):
 
         Returns ``(moments, losses)``: ``moments`` those of :meth:`natural_moments`
         (``chunks`` None) or of :meth:`natural_block_moments`; ``losses`` every metric's
-        loss (:func:`brdffit.engine.metrics.loss`) of the model values that the same
-        Jacobian pass computes, name -> loss, on ``sides`` (the data prepared for each
-        metric, padded as ``prep`` is and sharing its geometry). One pass, not a
+        loss (:func:`brdffit.engine.metrics.losses`) of the model values that the same
+        Jacobian pass computes, name -> loss, on ``sides`` (metric name -> the data
+        prepared for it, padded as ``prep`` is and sharing its geometry). One pass, not a
         Jacobian for the covariance and a second evaluation for the losses: at the
         full MERL grid each is a full pass over 2.7 million residuals.
         """
