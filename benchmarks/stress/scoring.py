@@ -16,7 +16,7 @@ import numpy as np
 
 from brdffit import models as registry
 from brdffit.core.result import FitResult
-from brdffit.engine import metrics
+from brdffit.engine import robust as robust_mod
 from brdffit.engine.fit import fit
 from brdffit.engine.metrics import get_metric, prepare
 
@@ -39,7 +39,7 @@ from .regimes import (
 
 @eqx.filter_jit
 def _objective(model, robust, params, prep, scale):
-    return metrics.objective(model.evaluate(params, prep.g), prep, robust, scale)
+    return robust_mod.objective(model.evaluate(params, prep.g), prep, robust, scale)
 
 
 def objective(model, robust: str | None, scale: float, params: dict, prep) -> float:
@@ -52,7 +52,7 @@ def objective(model, robust: str | None, scale: float, params: dict, prep) -> fl
 def zero_objective(robust: str | None, scale: float, prep) -> float:
     """The objective of the zero BRDF: the data's own energy (the tolerance floor's scale)."""
     zero = jnp.zeros_like(prep.values)
-    return float(metrics.objective(zero, prep, robust, jnp.asarray(scale)))
+    return float(robust_mod.objective(zero, prep, robust, jnp.asarray(scale)))
 
 
 def _finite_params(params: dict) -> bool:

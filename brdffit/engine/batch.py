@@ -23,6 +23,7 @@ from brdffit.core.result import Status
 from brdffit.engine import lm, race, starts
 from brdffit.engine import metrics as metrics_mod
 from brdffit.engine import objective as objective_mod
+from brdffit.engine import robust as robust_mod
 from brdffit.engine.objective import Objective
 from brdffit.engine.settings import Settings
 from brdffit.engine.uncertainty import Outcome
@@ -210,7 +211,7 @@ class Engine:
             r = r[: 3 * preps[i].n]  # not the padding's
             mad = 1.4826 * float(np.median(np.abs(r - np.median(r))))
             spread = mad if mad > 0 else float(np.sqrt(np.mean(r * r)))
-            out.append(metrics_mod.ROBUST_TUNING[self.s.robust] * max(spread, 1e-300))
+            out.append(robust_mod.ROBUST_TUNING[self.s.robust] * max(spread, 1e-300))
         return np.asarray(out)
 
 

@@ -389,63 +389,6 @@ def _pseudo_huber(e: Array) -> Array:
     return e * jnp.sqrt(2.0 / (jnp.sqrt(1.0 + x * x) + 1.0))
 
 
-ROBUST_TUNING = {"huber": 1.345, "cauchy": 2.385}
-"""Tuning constants (in units of the residuals' robust sigma) for 95% efficiency."""
-
-
-def robust_residuals(r: Array, kind: str | None, scale: Array | np.ndarray | float) -> Array:
-    """Residuals whose squares are a robust loss of ``r`` with ``scale`` (residual units).
-
-    ``None`` returns ``r``. ``"huber"``: ``rho(r) = r^2`` for ``|r| <= c`` and
-    ``2 c |r| - c^2`` beyond; ``"cauchy"``: ``rho(r) = c^2 ln(1 + (r / c)^2)``. The
-    returned ``sign(r) sqrt(rho(r))`` keeps LM a least-squares solver; both forms are
-    smooth at 0 and equal ``r`` to first order there.
-    """
-    if kind is None:
-        return r
-    x = r / scale
-    if kind == "huber":
-        a = jnp.abs(x)
-        big = a > 1.0
-        root = jnp.sqrt(jnp.where(big, 2.0 * a - 1.0, 1.0))
-        return jnp.where(big, jnp.sign(r) * scale * root, r)
-    if kind == "cauchy":
-        # x * sqrt(ln(1 + x^2) / x^2), written with log1p and safe at x = 0
-        x2 = x * x
-        safe = jnp.where(x2 > 1e-12, x2, 1.0)
-        factor = jnp.where(x2 > 1e-12, jnp.sqrt(jnp.log1p(safe) / safe), 1.0 - 0.25 * x2)
-        return r * factor
-    raise ParameterError(f"robust={kind!r}: use None, 'huber' or 'cauchy'")
-
-
-def robust_weights(r: Array, kind: str | None, scale: Array | np.ndarray | float) -> Array:
-    """IRLS weights ``rho'(r^2)`` of the robust loss of :func:`robust_residuals`.
-
-    The gradient of ``0.5 sum rho(r^2)`` is ``J^T (w r)`` with these ``w``; the
-    Gauss-Newton model of the reweighted problem is ``J^T diag(w) J``. ``None``: ones;
-    ``"huber"``: ``min(1, scale / |r|)``; ``"cauchy"``: ``1 / (1 + (r / scale)^2)``.
-    """
-    if kind is None:
-        return jnp.ones_like(r)
-    x = jnp.abs(r) / scale
-    if kind == "huber":
-        return 1.0 / jnp.maximum(x, 1.0)
-    if kind == "cauchy":
-        return 1.0 / (1.0 + x * x)
-    raise ParameterError(f"robust={kind!r}: use None, 'huber' or 'cauchy'")
-
-
-def objective(
-    f_model: Array,
-    prep: Prepared,
-    robust: str | None = None,
-    scale: Array | np.ndarray | float = 1.0,
-) -> Array:
-    """``0.5 sum rho(r)^2``: what Levenberg-Marquardt minimises (``rho`` the robust loss)."""
-    r = robust_residuals(residuals(f_model, prep), robust, scale)
-    return 0.5 * jnp.sum(r * r)
-
-
 def losses(f_model: Array, cos_i: Array, sides: dict[str, Prepared]) -> dict[str, Array]:
     """Every metric's exact loss of ``f_model``, name -> loss, as :func:`loss` gives it.
 

@@ -15,7 +15,7 @@ natural ``x`` otherwise). The objective minimised is
     C(z) = 0.5 sum_i rho(r_i(z)^2)
 
 with ``r`` the residual vector of the data's metric (:func:`brdffit.engine.metrics.residuals`)
-and ``rho`` the robust loss (identity without one; :func:`brdffit.engine.metrics.robust_residuals`).
+and ``rho`` the robust loss (identity without one; :func:`brdffit.engine.robust.robust_residuals`).
 Levenberg-Marquardt sees it through :meth:`Objective.linearize`: the iteratively
 reweighted Gauss-Newton model ``g = J^T W r``, ``H = J^T W J`` with ``W = rho'(r^2)``.
 """
@@ -33,6 +33,7 @@ from jaxtyping import Array, Float
 from brdffit.core.abstract_model import AbstractModel
 from brdffit.core.parameters import Parameter, ParameterLayout, Params
 from brdffit.engine import metrics as metrics_mod
+from brdffit.engine import robust as robust_mod
 from brdffit.engine.block_errors import BlockChunks
 from brdffit.engine.jacobian import Colouring, channel_grams, compressed, normal
 from brdffit.engine.metrics import Prepared
@@ -64,7 +65,7 @@ class Objective(eqx.Module):
         scale: float = 1.0,
     ) -> Objective:
         """The objective of ``model`` with ``freeze`` (name -> natural value)."""
-        if robust is not None and robust not in metrics_mod.ROBUST_TUNING:
+        if robust is not None and robust not in robust_mod.ROBUST_TUNING:
             raise ParameterError(f"robust={robust!r}: use None, 'huber' or 'cauchy'")
         layout = ParameterLayout.build(model.parameters, freeze)
         frozen = {k: np.asarray(v, np.float64) for k, v in layout.frozen.items()}
@@ -96,7 +97,7 @@ class Objective(eqx.Module):
 
     def cost(self, z: Float[Array, " k"], prep: Prepared) -> Float[Array, ""]:
         """``0.5 sum rho(r^2)`` at ``z``."""
-        r = metrics_mod.robust_residuals(self.residuals(z, prep), self.robust, self.scale)
+        r = robust_mod.robust_residuals(self.residuals(z, prep), self.robust, self.scale)
         return 0.5 * jnp.sum(r * r)
 
     @property
@@ -123,8 +124,8 @@ class Objective(eqx.Module):
         from the compressed Jacobian (:func:`brdffit.engine.jacobian.normal`; ``J`` itself
         is never formed)."""
         b, r = self._compressed(z, prep)
-        w = metrics_mod.robust_weights(r, self.robust, self.scale)
-        rr = metrics_mod.robust_residuals(r, self.robust, self.scale)
+        w = robust_mod.robust_weights(r, self.robust, self.scale)
+        rr = robust_mod.robust_residuals(r, self.robust, self.scale)
         g, h = normal(b, w, r, self.colouring)
         return 0.5 * jnp.sum(rr * rr), g, h
 
@@ -234,7 +235,7 @@ class Objective(eqx.Module):
         def robust(xn: Array) -> tuple[Array, tuple[Array, Array]]:
             f = self.model.evaluate(self.params(layout.to_solver(xn)), prep.g)
             r = metrics_mod.residuals(f, prep)
-            return metrics_mod.robust_residuals(r, self.robust, self.scale), (r, f)
+            return robust_mod.robust_residuals(r, self.robust, self.scale), (r, f)
 
         e, (r, f), b = compressed(robust, layout.from_solver(z), self.colouring)
         return b, e, r, f

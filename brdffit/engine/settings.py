@@ -10,7 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from brdffit.engine import lm
-from brdffit.engine import metrics as metrics_mod
+from brdffit.engine import robust as robust_mod
 from brdffit.engine.uncertainty import CHOICES
 from brdffit.errors import ParameterError
 
@@ -54,7 +54,7 @@ class Settings:
     def __post_init__(self) -> None:
         if self.errors not in CHOICES:
             raise ParameterError(f"errors={self.errors!r}: use one of {', '.join(CHOICES)}")
-        if self.robust is not None and self.robust not in metrics_mod.ROBUST_TUNING:
+        if self.robust is not None and self.robust not in robust_mod.ROBUST_TUNING:
             raise ParameterError(f"robust={self.robust!r}: use None, 'huber' or 'cauchy'")
         rs = self.robust_scale
         if rs is not None and not (math.isfinite(rs) and rs > 0):

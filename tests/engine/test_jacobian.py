@@ -10,7 +10,7 @@ import pytest
 
 from brdffit import models, synthesize
 from brdffit.core.geometry import shading_geometry
-from brdffit.engine import metrics as metrics_mod
+from brdffit.engine import robust as robust_mod
 from brdffit.engine.block_errors import BlockChunks, block_index
 from brdffit.engine.jacobian import Colouring
 from brdffit.engine.metrics import get_metric, prepare
@@ -124,11 +124,11 @@ def test_jacobian_and_normal_equations_equal_plain_forward_mode(name, options):
         )  # fmt: skip
         r = obj.residuals(z, prep)
         jac = jax.jacfwd(lambda zz: obj.residuals(zz, prep))(z)
-        w = metrics_mod.robust_weights(r, obj.robust, obj.scale)
+        w = robust_mod.robust_weights(r, obj.robust, obj.scale)
 
         def robust(xn):
             rr = obj.residuals(obj.layout.to_solver(xn), prep)
-            return metrics_mod.robust_residuals(rr, obj.robust, obj.scale)
+            return robust_mod.robust_residuals(rr, obj.robust, obj.scale)
 
         x = obj.layout.from_solver(z)
         return ours, (jac, (jac * w[:, None]).T @ r, (jac * w[:, None]).T @ jac,
