@@ -37,15 +37,16 @@ Shifted Gamma micro-facet distribution", Computer Graphics Forum 31(4) (EGSR 201
   incidence, ``~ -ln x`` at grazing) and its derivative at :data:`TABLE_NODES`
   equispaced ``tau = ln x`` on :data:`TABLE_TAU`; each sample reads it by cubic Hermite
   interpolation (:func:`smith_lambda_table`): C1, differentiable in ``alpha, p`` through
-  the table and through ``x``, error ``h^4 max|y''''| / 384``, measured < 2e-8 in
-  ``ln Lambda`` over the bounds (tests). The quadrature itself runs only at the
-  Chebyshev nodes of :data:`TABLE_PANELS` panels (:data:`PANEL_NODES` each); the table's
-  values and slopes are the panels' Chebyshev interpolants there (one constant linear
-  map, :func:`panel_maps`), exact to about 1e-11, far below the Hermite error. Below ``x0 = e^-15`` (within ``3e-7 sqrt(alpha)``
-  rad of grazing) it uses the grazing expansion ``Lambda = A/x - 1/2 + O(x)`` through the
-  table's first node, ``Lambda = (Lambda(x0) + 1/2) x0 / x - 1/2`` (from ``H(y) = y - pi/2
-  + arctan(1/y)``; the constant is ``-(pi/2) Gamma(1-p, u) / (pi Gamma(1-p, alpha))`` at
-  ``u = alpha``), error ``O(x0^2)``, measured < 1e-8.
+  the table and through ``x``, error ``h^4 max|y''''| / 384``, measured < 2e-8 in ``ln
+  Lambda`` over the bounds (tests). The quadrature itself runs only at the Chebyshev
+  nodes of :data:`TABLE_PANELS` panels (:data:`PANEL_NODES` each); the table's values
+  and slopes are the panels' Chebyshev interpolants there (one constant linear map,
+  :func:`panel_maps`), exact to about 1e-11, far below the Hermite error. Below ``x0 =
+  e^-15`` (within ``3e-7 sqrt(alpha)`` rad of grazing) it uses the grazing expansion
+  ``Lambda = A/x - 1/2 + O(x)`` through the table's first node, ``Lambda = (Lambda(x0) +
+  1/2) x0 / x - 1/2`` (from ``H(y) = y - pi/2 + arctan(1/y)``; the constant is ``-(pi/2)
+  Gamma(1-p, u) / (pi Gamma(1-p, alpha))`` at ``u = alpha``), error ``O(x0^2)``,
+  measured < 1e-8.
 * ``F = F0 - F1 cos_d + (1 - F0)(1 - cos_d)^5``: Schlick with the paper's extra linear
   term (as in the authors' released code), floored at 0 (``F >= 0`` holds whenever
   ``F1 <= F0``, which a box cannot express).
