@@ -46,7 +46,7 @@ import brdffit
 from brdffit import fit, models, synthesize
 from brdffit.core.parameters import ParameterLayout
 from brdffit.engine.metrics import get_metric, keep_mask, prepare
-from brdffit.engine.metrics import residuals as jax_residuals
+from brdffit.engine.misfit import residuals as jax_residuals
 from brdffit.io.merl_grid import merl_subgrid
 
 TRUTH = {"kd": [0.12, 0.30, 0.55], "ks": [0.8, 0.8, 0.8], "f0": [0.9, 0.6, 0.3], "alpha": 0.12}

@@ -19,11 +19,8 @@ valid gives the same numbers as before per-channel masks. Ngan et al. cut
 both angles at 80 degrees; here the cut (``cut_deg``, default 80) applies to every
 metric and is chosen once, when the data are prepared.
 
-Least squares needs ``loss = F(sum r^2)``: for the quadratic metrics ``r`` is the
-weighted difference itself. ``log1p_l1`` is an L1 loss, so LM minimises a smooth
-pseudo-Huber surrogate ``sum 2 delta^2 (sqrt(1 + (e/delta)^2) - 1)`` with
-``delta = 1e-3`` (quadratic below delta, ``2 delta |e|`` above); the reported loss is
-always the exact mean absolute difference.
+The residuals LM minimises and the exact losses reported are in
+:mod:`brdffit.engine.misfit`.
 """
 
 from __future__ import annotations
@@ -33,9 +30,7 @@ from typing import Literal
 
 import equinox as eqx
 import jax
-import jax.numpy as jnp
 import numpy as np
-from jax import lax
 from jaxtyping import Array, Bool, Float, Int
 
 from brdffit.core.geometry import ShadingGeometry, shading_geometry
@@ -340,79 +335,3 @@ def transform_side(metric: Metric, f: np.ndarray, cos_i: np.ndarray) -> np.ndarr
     data's channels below it are left out by :func:`prepare`); on the host."""
     x = f * cos_i[:, None]
     return np.log1p(np.maximum(x, LOG_FLOOR)) if metric.log1p else x
-
-
-def differences(f_model: Array, prep: Prepared) -> Array:
-    """Unweighted differences ``T(f_model cos) - T(f_data cos)``, (N, 3), ``T`` the
-    metric's (``prep.log1p``: a conditional, so one compiled program serves every metric
-    and runs only the form it needs; a ``where`` computing both, tangents included, made
-    a walter fit at 20,234 samples take 0.23 s, against 0.16 s)."""
-    x = f_model * prep.cos_i[:, None]
-    return lax.cond(prep.log1p, _log_side, lambda v: v, x) - prep.target
-
-
-def residuals(f_model: Array, prep: Prepared) -> Array:
-    """The flat residual vector LM minimises (``0.5 sum r^2``), length 3N.
-
-    One branch per form of metric (``prep.log1p``, ``prep.l1``), each computing the whole
-    residual ``sqrt(w) rho(T(f cos) - T(f_data cos))``: XLA fuses a branch into one pass
-    over the samples, where a conditional per switch writes every intermediate array
-    out in full (Lambert on the full MERL grid under low_e2, best of 15 warm calls: the
-    cost 27.8 ms against 39.6 ms, a linearisation 76.0 ms against 92.9 ms)."""
-    form = prep.log1p.astype(jnp.int32) + 2 * prep.l1.astype(jnp.int32)
-    return lax.switch(form, _RESIDUALS, f_model, prep)
-
-
-def _residuals_of(log1p: bool, l1: bool):
-    """:func:`residuals` of one form of metric, its switches known while tracing."""
-
-    def residuals(f_model: Array, prep: Prepared) -> Array:
-        x = f_model * prep.cos_i[:, None]
-        e = (_log_side(x) if log1p else x) - prep.target
-        return (jnp.sqrt(prep.weight) * (_pseudo_huber(e) if l1 else e)).ravel()
-
-    return residuals
-
-
-_RESIDUALS = [_residuals_of(log1p, l1) for l1 in (False, True) for log1p in (False, True)]
-"""The four forms, indexed by ``log1p + 2 l1``."""
-
-
-def _log_side(x: Array) -> Array:
-    return jnp.log1p(jnp.maximum(x, LOG_FLOOR))
-
-
-def _pseudo_huber(e: Array) -> Array:
-    """``e`` such that ``e^2`` is the pseudo-Huber loss of ``e``, written as
-    ``e sqrt(2 / (sqrt(1 + x^2) + 1))`` with ``x = e / L1_DELTA``: smooth at ``e = 0``."""
-    x = e / L1_DELTA
-    return e * jnp.sqrt(2.0 / (jnp.sqrt(1.0 + x * x) + 1.0))
-
-
-def losses(f_model: Array, cos_i: Array, sides: dict[str, Prepared]) -> dict[str, Array]:
-    """Every metric's exact loss of ``f_model``, name -> loss, as :func:`loss` gives it.
-
-    ``sides``: metric name -> the data prepared for it, on the samples whose ``cos_i``
-    is given (the same geometry, as :func:`prepare_all` makes it). Each metric's
-    transform and form are read from :data:`METRICS` by name while tracing, not from the
-    data's switches: ``f cos`` and ``ln(1 + f cos)`` are then computed once for all
-    metrics, where a conditional per metric (:func:`differences`) recomputes them
-    inside each branch. Lambert on the full MERL grid: the four losses with a
-    conditional each took 0.085 s as their own program; this way, inside the Jacobian
-    pass at the answer, they add 0.035 s to its 0.071 s.
-    """
-    x = f_model * cos_i[:, None]
-    out = {}
-    for name, prep in sides.items():
-        m = METRICS[name]
-        e = (_log_side(x) if m.log1p else x) - prep.target
-        total = jnp.sum(prep.weight * (jnp.abs(e) if m.l1 else e * e))
-        out[name] = jnp.sqrt(total) if m.root else total
-    return out
-
-
-def loss(f_model: Array, prep: Prepared) -> Array:
-    """The exact scalar loss of the metric ``prep`` was prepared for (the module table)."""
-    e = differences(f_model, prep)
-    total = jnp.sum(prep.weight * jnp.where(prep.l1, jnp.abs(e), e * e))
-    return jnp.where(prep.root, jnp.sqrt(total), total)

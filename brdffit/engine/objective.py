@@ -14,7 +14,7 @@ natural ``x`` otherwise). The objective minimised is
 
     C(z) = 0.5 sum_i rho(r_i(z)^2)
 
-with ``r`` the residual vector of the data's metric (:func:`brdffit.engine.metrics.residuals`)
+with ``r`` the residual vector of the data's metric (:func:`brdffit.engine.misfit.residuals`)
 and ``rho`` the robust loss (identity without one; :func:`brdffit.engine.robust.robust_residuals`).
 Levenberg-Marquardt sees it through :meth:`Objective.linearize`: the iteratively
 reweighted Gauss-Newton model ``g = J^T W r``, ``H = J^T W J`` with ``W = rho'(r^2)``.
@@ -32,7 +32,7 @@ from jaxtyping import Array, Float
 
 from brdffit.core.abstract_model import AbstractModel
 from brdffit.core.parameters import Parameter, ParameterLayout, Params
-from brdffit.engine import metrics as metrics_mod
+from brdffit.engine import misfit
 from brdffit.engine import robust as robust_mod
 from brdffit.engine.block_errors import BlockChunks
 from brdffit.engine.jacobian import Colouring, channel_grams, compressed, normal
@@ -93,7 +93,7 @@ class Objective(eqx.Module):
 
     def residuals(self, z: Float[Array, " k"], prep: Prepared) -> Float[Array, " m"]:
         """The plain residual vector (length 3N) of ``prep``'s metric at ``z``."""
-        return metrics_mod.residuals(self.model.evaluate(self.params(z), prep.g), prep)
+        return misfit.residuals(self.model.evaluate(self.params(z), prep.g), prep)
 
     def cost(self, z: Float[Array, " k"], prep: Prepared) -> Float[Array, ""]:
         """``0.5 sum rho(r^2)`` at ``z``."""
@@ -179,7 +179,7 @@ class Objective(eqx.Module):
 
         Returns ``(moments, losses)``: ``moments`` those of :meth:`natural_moments`
         (``chunks`` None) or of :meth:`natural_block_moments`; ``losses`` every metric's
-        loss (:func:`brdffit.engine.metrics.losses`) of the model values that the same
+        loss (:func:`brdffit.engine.misfit.losses`) of the model values that the same
         Jacobian pass computes, name -> loss, on ``sides`` (metric name -> the data
         prepared for it, padded as ``prep`` is and sharing its geometry). One pass, not a
         Jacobian for the covariance and a second evaluation for the losses: at the
@@ -187,7 +187,7 @@ class Objective(eqx.Module):
         """
         b, e, r, f = self._natural_compressed(z, prep)
         moments = self._moments(b, e, r) if chunks is None else self._block_moments(b, e, r, chunks)
-        return moments, metrics_mod.losses(f, prep.cos_i, sides)
+        return moments, misfit.losses(f, prep.cos_i, sides)
 
     def _moments(self, b: Array, e: Array, r: Array) -> tuple[Array, Array, Array, Array]:
         """:meth:`natural_moments` from the compressed Jacobian ``b``, ``e`` and ``r``."""
@@ -234,7 +234,7 @@ class Objective(eqx.Module):
 
         def robust(xn: Array) -> tuple[Array, tuple[Array, Array]]:
             f = self.model.evaluate(self.params(layout.to_solver(xn)), prep.g)
-            r = metrics_mod.residuals(f, prep)
+            r = misfit.residuals(f, prep)
             return robust_mod.robust_residuals(r, self.robust, self.scale), (r, f)
 
         e, (r, f), b = compressed(robust, layout.from_solver(z), self.colouring)

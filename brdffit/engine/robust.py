@@ -13,7 +13,8 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array
 
-from brdffit.engine.metrics import Prepared, residuals
+from brdffit.engine.metrics import Prepared
+from brdffit.engine.misfit import residuals
 from brdffit.errors import ParameterError
 
 ROBUST_TUNING = {"huber": 1.345, "cauchy": 2.385}

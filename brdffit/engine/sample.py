@@ -1,6 +1,6 @@
 """Posterior sampling with emcee's affine-invariant ensemble sampler.
 
-Likelihood: the metric's residual vector ``r`` (:func:`brdffit.engine.metrics.residuals`) on
+Likelihood: the metric's residual vector ``r`` (:func:`brdffit.engine.misfit.residuals`) on
 a seeded subsample of the valid samples, Gaussian with free noise scales:
 
 * ``noise="mixed"`` (the default): ``r_i ~ N(0, (sigma_add a_i)^2 + (sigma_mult m_i)^2)``
@@ -65,6 +65,7 @@ from brdffit.core.measurements import Measurements
 from brdffit.core.parameters import Parameter, ParameterLayout
 from brdffit.core.result import FitResult
 from brdffit.engine import metrics as metrics_mod
+from brdffit.engine import misfit
 from brdffit.engine.objective import Objective, freeze_map, start_params
 from brdffit.engine.posterior import (
     ChainTooShortWarning,
@@ -115,7 +116,7 @@ class _Target(eqx.Module):
             i += p.size
         obj = self.objective
         params = obj.layout.params(u, "unconstrained")
-        r = metrics_mod.residuals(obj.model.evaluate(params, prep.g), prep)
+        r = misfit.residuals(obj.model.evaluate(params, prep.g), prep)
         var = jnp.sum((jnp.exp(log_sigma)[:, None] * scales) ** 2, axis=0)
         ll = -0.5 * jnp.sum(jnp.log(var)) - 0.5 * jnp.sum(r * r / var)
         out = lp + ll
@@ -137,7 +138,7 @@ def _factor(prep, f_model, relative: bool):
     """
 
     def r_of(f):
-        return metrics_mod.residuals(f, prep)
+        return misfit.residuals(f, prep)
 
     tangent = f_model if relative else jnp.ones_like(f_model)
     s = jnp.abs(jax.jvp(r_of, (f_model,), (tangent,))[1])
@@ -309,7 +310,7 @@ def sample(
     full = {**start, **frozen}
     f_start = model.evaluate(full, prep.g)
     scales, sigma_labels = _noise_scales(prep, f_start, noise)
-    r0 = np.asarray(metrics_mod.residuals(f_start, prep))
+    r0 = np.asarray(misfit.residuals(f_start, prep))
     sigma0 = _start_sigmas(r0, np.asarray(scales))
     u0 = np.concatenate(
         [np.asarray(layout.unconstrained(start)), np.log(np.maximum(sigma0, 1e-12))]

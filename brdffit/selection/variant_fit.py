@@ -23,7 +23,7 @@ import numpy as np
 from jax import lax
 
 from brdffit.core.abstract_model import AbstractModel
-from brdffit.engine import lm, metrics, starts
+from brdffit.engine import lm, metrics, misfit, starts
 from brdffit.engine.objective import Objective
 
 
@@ -102,10 +102,10 @@ def _solve_rows(obj: Objective, z0, prep: metrics.Prepared, train, lo, hi, tol):
         z = jnp.where(obj.cost(lin, p) < obj.cost(z, p), lin, z)
         d = lm.solve(obj, z, p, lo, hi, tol)
         f = obj.model.evaluate(obj.params(d.z), prep.g)
-        e = metrics.differences(f, prep)
+        e = misfit.differences(f, prep)
         e = jnp.where(prep.l1, jnp.abs(e), e * e)
         held = jnp.sum(prep.weight * (1.0 - mask)[:, None] * e)
-        r = metrics.residuals(f, prep)
-        return d.z, d.reason, held, jnp.sum(r * r), metrics.loss(f, prep)
+        r = misfit.residuals(f, prep)
+        return d.z, d.reason, held, jnp.sum(r * r), misfit.loss(f, prep)
 
     return lax.map(one, (z0, train), batch_size=lm.batch_size())

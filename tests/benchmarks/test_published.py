@@ -20,7 +20,8 @@ from benchmarks.published.families import FAMILIES, blinn_reading
 from benchmarks.published.fitfile import parse_line, read_fit_file
 from brdffit import models
 from brdffit.core.measurements import Measurements
-from brdffit.engine.metrics import get_metric, loss, prepare
+from brdffit.engine.metrics import get_metric, prepare
+from brdffit.engine.misfit import loss
 from tests.helpers import random_pairs
 
 

@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
 from brdffit import Measurements, MeasurementsError
-from brdffit.engine import metrics
+from brdffit.engine import metrics, misfit
 
 
 def _dirs(n: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
@@ -77,12 +77,12 @@ def test_a_masked_channel_has_no_weight_and_the_normalisation_counts_channels():
         w = np.asarray(p_part.weight)
         assert (w[::3, 2] == 0).all() and (w[1::3] > 0).all()
         # a model equal to the data everywhere has loss 0 with or without the holes
-        assert float(metrics.loss(p_full.values, p_part)) == pytest.approx(0.0, abs=1e-15)
+        assert float(misfit.loss(p_full.values, p_part)) == pytest.approx(0.0, abs=1e-15)
         # a uniform relative error gives the same mean loss with the holes (ngan, l1)
         f = 1.1 * p_full.values
         if m.weighting == "uniform":
-            lf = float(metrics.loss(f, p_full))
-            assert float(metrics.loss(f, p_part)) == pytest.approx(lf, rel=0.15)
+            lf = float(misfit.loss(f, p_full))
+            assert float(misfit.loss(f, p_part)) == pytest.approx(lf, rel=0.15)
 
 
 def test_log_metrics_leave_out_values_outside_the_log_domain():

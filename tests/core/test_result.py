@@ -14,6 +14,7 @@ import pytest
 from brdffit import FitResult, Measurements, fit, models, rank, synthesize
 from brdffit.core.result_terms import per_sample, value_text
 from brdffit.engine import metrics as metrics_mod
+from brdffit.engine import misfit
 
 
 @pytest.fixture(scope="module")
@@ -85,7 +86,7 @@ def test_losses_per_sample_do_not_depend_on_the_sample_count():
         preps = metrics_mod.prepare_all(d, cut_deg=80.0)
         n = next(iter(preps.values())).n
         some = next(iter(preps.values()))
-        losses = metrics_mod.losses(walter.evaluate(params, some.g), some.cos_i, preps)
+        losses = misfit.losses(walter.evaluate(params, some.g), some.cos_i, preps)
         return {k: (float(v), per_sample(k, float(v), n)) for k, v in losses.items()}
 
     one, two = per(data), per(twice)

@@ -9,7 +9,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from brdffit import Measurements
-from brdffit.engine import metrics
+from brdffit.engine import metrics, misfit
 from tests.helpers import random_pairs
 
 
@@ -45,7 +45,7 @@ def test_loss_matches_design_formula(name, cut):
     m = metrics.get_metric(name)
     prep = metrics.prepare(data, m, cut_deg=cut)
     keep = metrics.keep_mask(data, cut)
-    got = float(metrics.loss(jnp.asarray(fm[keep]), prep))
+    got = float(misfit.loss(jnp.asarray(fm[keep]), prep))
     # Same float64 sums in another order: 1e-12 relative.
     np.testing.assert_allclose(got, _reference(name, data, fm, cut), rtol=1e-12)
 
@@ -56,10 +56,10 @@ def test_quadratic_metrics_loss_is_sum_of_squared_residuals(name):
     m = metrics.get_metric(name)
     prep = metrics.prepare(data, m)
     keep = metrics.keep_mask(data, 80.0)
-    r = metrics.residuals(jnp.asarray(fm[keep]), prep)
+    r = misfit.residuals(jnp.asarray(fm[keep]), prep)
     total = float(jnp.sum(r * r))
     expect = total**0.5 if name == "ngan" else total
-    np.testing.assert_allclose(float(metrics.loss(jnp.asarray(fm[keep]), prep)), expect, rtol=1e-12)
+    np.testing.assert_allclose(float(misfit.loss(jnp.asarray(fm[keep]), prep)), expect, rtol=1e-12)
 
 
 def test_l1_surrogate_is_quadratic_near_zero_and_linear_far():
@@ -70,7 +70,7 @@ def test_l1_surrogate_is_quadratic_near_zero_and_linear_far():
     for e, expect in [(1e-6, 1e-12), (1.0, 2 * metrics.L1_DELTA * 1.0)]:
         # f such that log1p(f cos) - target = e exactly for every sample and channel.
         f = (jnp.expm1(prep.target + e)) / prep.cos_i[:, None]
-        r = metrics.residuals(f, prep)
+        r = misfit.residuals(f, prep)
         # r^2 / w is 2 delta^2 (sqrt(1 + (e/delta)^2) - 1): e^2 for small e, ~2 delta |e| for large.
         np.testing.assert_allclose(float(r[0] ** 2 / w), expect, rtol=2e-3)
 
@@ -102,10 +102,10 @@ def test_padded_rows_add_nothing_to_residuals_or_loss(name):
     big = prep.pad(prep.n + 37)
     # the padding repeats the first sample's directions: a model is evaluated there
     f_big = jnp.concatenate([f, jnp.repeat(f[:1], 37, axis=0)])
-    r, r_big = metrics.residuals(f, prep), metrics.residuals(f_big, big)
+    r, r_big = misfit.residuals(f, prep), misfit.residuals(f_big, big)
     np.testing.assert_array_equal(r_big[: r.size], r)
     assert np.all(np.asarray(r_big[r.size :]) == 0.0)
-    np.testing.assert_allclose(metrics.loss(f_big, big), metrics.loss(f, prep), rtol=1e-14)
+    np.testing.assert_allclose(misfit.loss(f_big, big), misfit.loss(f, prep), rtol=1e-14)
     assert big.rows == prep.rows + 37 and big.n == prep.n
     assert prep.padded().rows == metrics.shape_bucket(prep.n) and prep.padded().n == prep.n
 
@@ -126,7 +126,7 @@ def test_prepare_all_pads_once_and_its_samples_are_prepare_s(name):
     assert not np.any(np.asarray(padded.weight)[prep.n :])
     f = fm[metrics.keep_mask(data, 80.0)]
     f_big = jnp.asarray(np.concatenate([f, np.repeat(f[:1], padded.rows - prep.n, 0)]))
-    np.testing.assert_allclose(metrics.loss(f_big, padded), metrics.loss(jnp.asarray(f), prep),
+    np.testing.assert_allclose(misfit.loss(f_big, padded), misfit.loss(jnp.asarray(f), prep),
                                rtol=1e-14)  # fmt: skip
-    np.testing.assert_allclose(metrics.losses(f_big, padded.cos_i, every)[name],
-                               metrics.loss(jnp.asarray(f), prep), rtol=1e-14)  # fmt: skip
+    np.testing.assert_allclose(misfit.losses(f_big, padded.cos_i, every)[name],
+                               misfit.loss(jnp.asarray(f), prep), rtol=1e-14)  # fmt: skip
