@@ -98,8 +98,11 @@ def losses(f_model: Array, cos_i: Array, sides: dict[str, Prepared]) -> dict[str
     return out
 
 
-_FORMS = tuple(itertools.product((False, True), repeat=3))
-"""``(root, l1, log1p)`` of :func:`loss`'s branches, branch ``4 root + 2 l1 + log1p``."""
+_LOSSES = [
+    functools.partial(_exact, log1p=log1p, l1=l1, root=root)
+    for root, l1, log1p in itertools.product((False, True), repeat=3)
+]
+"""The eight forms of :func:`loss`, indexed by ``log1p + 2 l1 + 4 root``."""
 
 
 def loss(f_model: Array, prep: Prepared) -> Array:
@@ -111,7 +114,4 @@ def loss(f_model: Array, prep: Prepared) -> Array:
         + 2 * prep.l1.astype(jnp.int32)
         + 4 * prep.root.astype(jnp.int32)
     )
-    branches = [
-        functools.partial(_exact, log1p=log1p, l1=l1, root=root) for root, l1, log1p in _FORMS
-    ]
-    return lax.switch(form, branches, f_model * prep.cos_i[:, None], prep)
+    return lax.switch(form, _LOSSES, f_model * prep.cos_i[:, None], prep)

@@ -37,7 +37,6 @@ from brdffit.engine import robust as robust_mod
 from brdffit.engine.block_errors import BlockChunks
 from brdffit.engine.jacobian import Colouring, channel_grams, compressed, normal
 from brdffit.engine.metrics import Prepared
-from brdffit.errors import ParameterError
 from brdffit.util.programs import program
 
 
@@ -65,8 +64,7 @@ class Objective(eqx.Module):
         scale: float = 1.0,
     ) -> Objective:
         """The objective of ``model`` with ``freeze`` (name -> natural value)."""
-        if robust is not None and robust not in robust_mod.ROBUST_TUNING:
-            raise ParameterError(f"robust={robust!r}: use None, 'huber' or 'cauchy'")
+        robust_mod.check_kind(robust)
         layout = ParameterLayout.build(model.parameters, freeze)
         frozen = {k: np.asarray(v, np.float64) for k, v in layout.frozen.items()}
         return cls(model, layout.free, frozen, robust, np.asarray(float(scale)))

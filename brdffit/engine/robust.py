@@ -21,6 +21,13 @@ ROBUST_TUNING = {"huber": 1.345, "cauchy": 2.385}
 """Tuning constants (in units of the residuals' robust sigma) for 95% efficiency."""
 
 
+def check_kind(kind: str | None) -> None:
+    """Raise :class:`~brdffit.errors.ParameterError` unless ``kind`` is None or a key of
+    :data:`ROBUST_TUNING`."""
+    if kind is not None and kind not in ROBUST_TUNING:
+        raise ParameterError(f"robust={kind!r}: use None, 'huber' or 'cauchy'")
+
+
 def robust_residuals(r: Array, kind: str | None, scale: Array | np.ndarray | float) -> Array:
     """Residuals whose squares are a robust loss of ``r`` with ``scale`` (residual units).
 

@@ -54,8 +54,7 @@ class Settings:
     def __post_init__(self) -> None:
         if self.errors not in CHOICES:
             raise ParameterError(f"errors={self.errors!r}: use one of {', '.join(CHOICES)}")
-        if self.robust is not None and self.robust not in robust_mod.ROBUST_TUNING:
-            raise ParameterError(f"robust={self.robust!r}: use None, 'huber' or 'cauchy'")
+        robust_mod.check_kind(self.robust)
         rs = self.robust_scale
         if rs is not None and not (math.isfinite(rs) and rs > 0):
             raise ParameterError(f"robust_scale={rs!r}: must be a positive number")
