@@ -10,7 +10,13 @@ each half, and each free scalar gives
     z = (a - b) / sqrt(se_a^2 + se_b^2)
 
 for every kind of standard error below, all computed at the same two optima. If the
-intervals mean what they say, 95% of the scalars have ``|z| <= 1.96``. The table's
+intervals mean what they say, 95% of the scalars have ``|z| <= 1.96``. For ``blocks``,
+whose intervals are Student-t ones (``t_0.975(nu)`` CR2 errors wide), ``z`` is the CR2
+difference ``(a - b) / sqrt(v_a + v_b)`` over ``t_0.975(nu_ab) / 1.96``, ``nu_ab`` the
+Welch-Satterthwaite degrees of freedom of the summed variance,
+``(v_a + v_b)^2 / (v_a^2 / nu_a + v_b^2 / nu_b)`` (Welch 1947): the difference of two
+estimates has more degrees of freedom than either, so adding the two t-widened errors
+in quadrature would overstate its spread by ``t(nu) / t(2 nu)``, 1.30 at ``nu = 3``. The table's
 **factor** is the 95th percentile of ``|z|`` over 1.96: the number the stated intervals
 would have to be multiplied by to hold 95% of the half differences (1 if calibrated,
 above 1 overconfident, below 1 conservative).
@@ -22,17 +28,20 @@ stays at :data:`SPLIT_DEG`):
 - ``CR1``: plain cluster sandwich; ``CR3``: one-step cluster jackknife; ``CR2``:
   bias-reduced cluster sandwich, normal quantiles;
 - ``blocks``: what ``errors="blocks"`` reports (the default for measured data): CR2
-  widened to the Student-t interval of Bell and McCaffrey's degrees of freedom.
+  widened to the Student-t interval of Bell and McCaffrey's degrees of freedom
+  (``z`` by Welch, above).
 
 Scalars without an error (held on a bound, or no covariance) are left out and counted.
 
 Run: python -m benchmarks.split_halves [--model walter] [--metric low_e2]
      [--stride 3 3 5] [--nbrdf 24] [--rgl FILE ...] [--block-deg 10] [--out F.md]
+     [--z-out F.json]
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import platform
 import time
 from pathlib import Path
@@ -48,12 +57,13 @@ from brdffit.engine.block_errors import (
     block_cells,
     block_chunks,
     block_covariance,
+    block_errors,
     coverage_factor,
     effective_dof,
 )
 from brdffit.engine.metrics import get_metric, keep_mask, prepare
 from brdffit.engine.objective import Objective
-from brdffit.engine.uncertainty import covariance
+from brdffit.engine.uncertainty import conditioning, covariance, firmly_held
 from brdffit.io.load import load_measurements
 from brdffit.util.atomic import write_text
 
@@ -88,24 +98,31 @@ def halves(data: Measurements) -> tuple[Measurements, Measurements]:
 
 def errors_at_optimum(model, data: Measurements, metric: str, block_deg: float) -> tuple:
     """Fit ``data``; the free scalars' values and each kind's standard errors (NaN where a
-    scalar is held on a bound or a kind gives none)."""
+    scalar is held on a bound or a kind gives none), each from the covariance over the
+    scalars the fit's own errors use (those held loosely on a bound included:
+    :func:`brdffit.engine.uncertainty.firmly_held`, judged by the blocks' errors)."""
     r = fit(model, data, metric, errors="blocks", cut_deg=None, throw=False)
     obj = Objective.build(model)
     z = jnp.asarray(obj.layout.solver_vector(r.params))
     prep = prepare(data, get_metric(metric), cut_deg=None)
     x = obj.layout.natural_vector(r.params)
     out = {k: np.full(x.size, np.nan) for k in KINDS}
+    nu = np.full(x.size, np.nan)
     if r.stderr is None:  # no covariance at this optimum (singular J^T J): no scalar
-        return x, out, r
-    act = np.isfinite(np.concatenate([np.ravel(r.stderr[p]) for p in r.params]))
+        return x, out, nu, r
+    free = np.isfinite(np.concatenate([np.ravel(r.stderr[p]) for p in r.params]))
+    jtj, meat, ee, _, grad = (np.asarray(a) for a in objective_mod.natural_moments(obj, z, prep))
+    chunks = block_chunks(prep, block_deg)
+    moments = objective_mod.natural_block_moments(obj, z, prep, chunks)
+    _, _, scores, grams = (np.asarray(a) for a in moments)
+    act = free  # the scalars the covariance is over, as the fit's own errors choose them
+    every = block_errors(jtj, scores, grams)[0] if conditioning(jtj)[1] is None else None
+    if every is not None and not free.all():
+        act = ~firmly_held(obj.layout, x, free, jtj, grad, every)
     ix = np.ix_(act, act)
-    jtj, meat, ee, _ = (np.asarray(a) for a in objective_mod.natural_moments(obj, z, prep))
     cov = covariance(jtj[ix], meat[ix], float(ee), 3 * prep.n, "sandwich")[0]
     if cov is not None:
         out["sandwich"][act] = np.sqrt(np.diag(cov))
-    chunks = block_chunks(prep, block_deg)
-    moments = objective_mod.natural_block_moments(obj, z, prep, chunks)
-    jtj, _, scores, grams = (np.asarray(a) for a in moments)
     jtj, scores, grams = jtj[ix], scores[:, act], grams[:, act][:, :, act]
     for kind, power in (("CR1", 0.0), ("CR2", 0.5), ("CR3", 1.0)):
         cov = block_covariance(jtj, scores, grams, power)[0]
@@ -114,7 +131,19 @@ def errors_at_optimum(model, data: Measurements, metric: str, block_deg: float) 
     dof = effective_dof(jtj, grams)
     if dof is not None:
         out["blocks"][act] = out["CR2"][act] * coverage_factor(dof)
-    return x, out, r
+        nu[act] = dof
+    for se in (*out.values(), nu):
+        se[~free] = np.nan
+    return x, out, nu, r
+
+
+def welch_z(xa, xb, se_a, se_b, nu_a, nu_b) -> np.ndarray:
+    """The CR2 difference ``(a - b) / sqrt(v_a + v_b)`` over the Welch-Satterthwaite
+    coverage factor ``t_0.975(nu_ab) / 1.96`` (module docstring)."""
+    va, vb = se_a**2, se_b**2
+    with np.errstate(invalid="ignore", divide="ignore"):
+        nu_ab = (va + vb) ** 2 / (va**2 / nu_a + vb**2 / nu_b)
+        return (xa - xb) / np.sqrt(va + vb) / coverage_factor(nu_ab)
 
 
 def _files(paths: list[Path]) -> str:
@@ -145,6 +174,7 @@ def main() -> None:
     ap.add_argument("--rgl", type=Path, nargs="*", default=[], help="RGL-EPFL .bsdf files")
     ap.add_argument("--block-deg", type=float, default=10.0, help="the errors' blocks")
     ap.add_argument("--out", type=Path, default=None)
+    ap.add_argument("--z-out", type=Path, default=None, help="values and errors (JSON)")
     args = ap.parse_args()
     import jax
 
@@ -153,14 +183,20 @@ def main() -> None:
     t0 = time.perf_counter()
     sources = [("NBRDF", p) for p in (materials(args.nbrdf) if args.nbrdf else [])]
     sources += [("RGL", p) for p in args.rgl]
-    rows, zs, labels = [], {}, {}
+    rows, zs, labels, dump = [], {}, {}, {}
     for group, path in sources:
         data = load_measurements(path, stride=tuple(args.stride))
         a, b = halves(data)
-        xa, ea, ra = errors_at_optimum(model, a, args.metric, args.block_deg)
-        xb, eb, _ = errors_at_optimum(model, b, args.metric, args.block_deg)
+        xa, ea, nua, ra = errors_at_optimum(model, a, args.metric, args.block_deg)
+        xb, eb, nub, _ = errors_at_optimum(model, b, args.metric, args.block_deg)
         z = {k: (xa - xb) / np.sqrt(ea[k] ** 2 + eb[k] ** 2) for k in KINDS}
+        z["blocks"] = welch_z(xa, xb, ea["CR2"], eb["CR2"], nua, nub)
         zs[(group, path.stem)] = z
+        dump[f"{group}/{path.stem}"] = {
+            "labels": list(ra.labels), "a": xa.tolist(), "b": xb.tolist(),
+            "se_a": {k: ea[k].tolist() for k in KINDS}, "se_b": {k: eb[k].tolist() for k in KINDS},
+            "dof_a": nua.tolist(), "dof_b": nub.tolist(),
+        }  # fmt: skip
         labels[(group, path.stem)] = [lab.split("[")[0] for lab in ra.labels]
         cells = [f"{within(z[k]):.0%} / {factor(z[k]):.2f}" for k in KINDS]
         rows.append(f"| {group} | {path.stem} | {a.n} / {b.n} | " + " | ".join(cells) + " |")
@@ -205,7 +241,8 @@ def main() -> None:
         "within their stated 95% intervals (95% if right). factor: 95th percentile of |z|",
         "over 1.96 (1 if right; above 1 the intervals are too narrow by that factor, below 1",
         "too wide). median |z| is 0.67 for normal z with correct errors (smaller for",
-        "Student-t intervals, which are wider in the tails).",
+        "Student-t intervals, which are wider in the tails). blocks: the CR2 difference",
+        "against Welch's t quantile for the two halves' summed variance (module docstring).",
         "",
         "| data | errors | scalars | within 95% | factor | median abs z |",
         "|---|---|---|---|---|---|",
@@ -228,6 +265,8 @@ def main() -> None:
     print(text)
     if args.out:
         write_text(args.out, text)
+    if args.z_out:
+        write_text(args.z_out, json.dumps(dump))
 
 
 if __name__ == "__main__":

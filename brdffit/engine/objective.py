@@ -129,12 +129,13 @@ class Objective(eqx.Module):
 
     def natural_moments(
         self, z: Float[Array, " k"], prep: Prepared
-    ) -> tuple[Float[Array, "k k"], Float[Array, "k k"], Float[Array, ""], Float[Array, ""]]:
-        """``(J^T J, J^T diag(e^2) J, e.e, r.r)`` for the covariance, in natural units.
+    ) -> tuple[Float[Array, "k k"], Float[Array, "k k"], Float[Array, ""], Float[Array, ""], Array]:
+        """``(J^T J, J^T diag(e^2) J, e.e, r.r, J^T e)`` for the covariance, in natural units.
 
         ``e`` are the robust residuals (``r`` without a robust loss) and ``J`` their
         Jacobian with respect to the free natural parameters (the Gauss-Newton form of
-        the M-estimator sandwich); ``r.r`` is the plain residuals' sum of squares.
+        the M-estimator sandwich); ``r.r`` is the plain residuals' sum of squares;
+        ``J^T e`` the gradient of ``e.e / 2``.
         """
         b, e, r, _ = self._natural_compressed(z, prep)
         return self._moments(b, e, r)
@@ -187,10 +188,11 @@ class Objective(eqx.Module):
         moments = self._moments(b, e, r) if chunks is None else self._block_moments(b, e, r, chunks)
         return moments, misfit.losses(f, prep.cos_i, sides)
 
-    def _moments(self, b: Array, e: Array, r: Array) -> tuple[Array, Array, Array, Array]:
+    def _moments(self, b: Array, e: Array, r: Array) -> tuple[Array, Array, Array, Array, Array]:
         """:meth:`natural_moments` from the compressed Jacobian ``b``, ``e`` and ``r``."""
         # one pass over [B, diag(e) B]: its Gram matrices hold both
-        both = jnp.concatenate([b, b * e.reshape(b.shape[:2])[:, :, None]], axis=2)
+        e3 = e.reshape(b.shape[:2])
+        both = jnp.concatenate([b, b * e3[:, :, None]], axis=2)
         gram, p = channel_grams(both, both), b.shape[2]
         col = self.colouring
         return (
@@ -198,6 +200,7 @@ class Objective(eqx.Module):
             col.spread_matrix(gram[:, p:, p:]),
             e @ e,
             r @ r,
+            col.spread_vector(jnp.einsum("ncp,nc->cp", b, e3)),
         )
 
     def _block_moments(

@@ -135,7 +135,7 @@ def test_jacobian_and_normal_equations_equal_plain_forward_mode(name, options):
                       jax.jacfwd(robust)(x), robust(x))  # fmt: skip
 
     ours, (jac, g_ref, h_ref, jn, en) = jax.tree.map(np.asarray, both(z, prep, chunks))
-    (_, j_ours), (cost, g, h), cost_ref, (jtj, meat, ee, _), (jtj_b, _, scores, grams) = ours
+    (_, j_ours), (cost, g, h), cost_ref, (jtj, meat, ee, _, grad), (jtj_b, _, scores, grams) = ours
     np.testing.assert_allclose(j_ours, jac, rtol=1e-13, atol=1e-13 * np.max(np.abs(jac)))
     np.testing.assert_allclose(cost, cost_ref, rtol=1e-14)
     np.testing.assert_allclose(g, g_ref, rtol=1e-12)
@@ -143,6 +143,7 @@ def test_jacobian_and_normal_equations_equal_plain_forward_mode(name, options):
     np.testing.assert_allclose(jtj, jn.T @ jn, rtol=1e-12)
     np.testing.assert_allclose(meat, (jn * en[:, None] ** 2).T @ jn, rtol=1e-12)
     np.testing.assert_allclose(ee, en @ en, rtol=1e-13)
+    np.testing.assert_allclose(grad, jn.T @ en, rtol=1e-11, atol=1e-14)
     np.testing.assert_allclose(jtj_b, jn.T @ jn, rtol=1e-12)
     rows = np.repeat(ids, 3)
     for b in (0, n_blocks // 2, n_blocks - 1):

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import time
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -76,3 +77,73 @@ def test_every_scalar_that_moves_along_a_null_direction_is_named():
     cond, reason, weak = conditioning(a.T @ a)
     assert reason is not None and cond > 1e15
     assert weak.tolist() == [True, True, True, False]
+
+
+def _held_result(model, params: dict, data: Measurements, held_names: tuple) -> FitResult:
+    """The FitResult of ``model`` at ``params`` with the scalars of ``held_names`` held on
+    a bound by the active set (no descent), sandwich errors."""
+    params = {k: jnp.asarray(v, float) for k, v in params.items()}
+    obj = Objective.build(model)
+    z = obj.layout.solver_vector(params)
+    held = np.array([lab.split("[")[0] in held_names for lab in obj.layout.labels()])
+    out = Outcome(
+        z=z, status=Status.CONVERGED, binding=held, start=obj.params(jnp.asarray(z)),
+        n_steps=0, n_starts=1, coarse=(0, 0), robust_scale=None,
+    )  # fmt: skip
+    preps = metrics_mod.prepare_all(data, cut_deg=80.0)
+    return assemble(
+        obj, metrics_mod.get_metric("low_e2"), out, preps, errors="sandwich", cut=80.0,
+        source="test", t0=time.perf_counter(),
+    )  # fmt: skip
+
+
+def _sandwich(model, params: dict, data: Measurements, keep: np.ndarray) -> np.ndarray:
+    """``A^-1 J^T diag(e^2) J A^-1`` (``A = J^T J``) over the scalars ``keep``, from JAX's
+    own Jacobian over all."""
+    obj = Objective.build(model)
+    layout = obj.layout
+    prep = metrics_mod.prepare(data, metrics_mod.get_metric("low_e2"), cut_deg=80.0)
+    x = jnp.asarray(layout.natural_vector({k: jnp.asarray(v, float) for k, v in params.items()}))
+    e = obj.residuals(layout.to_solver(x), prep)
+    jac = np.asarray(jax.jacfwd(lambda xn: obj.residuals(layout.to_solver(xn), prep))(x))
+    j, e = jac[:, keep], np.asarray(e)
+    bread = np.linalg.inv(j.T @ j)
+    return bread @ (j.T * e**2) @ j @ bread
+
+
+def test_errors_beside_a_loosely_held_scalar_are_its_marginal_block():
+    """``f0`` held at its bound 1, where the data's own optimum is (the truth): the
+    unbounded step moves it out by less than 1.96 of its errors, so it is uncertain
+    towards the inside and the free scalars' covariance is their block of the one over
+    all ten scalars (Andrews 1999), checked against the sandwich from JAX's own
+    Jacobian; ``ks``, which trades off against ``f0`` (the lobe's colour ``ks f0`` near
+    normal incidence), is wider than conditional on the held value."""
+    walter = models.get("walter")
+    truth = {"kd": [0.2, 0.3, 0.4], "ks": [0.3] * 3, "f0": [1.0] * 3, "alpha": 0.1}
+    data = synthesize(walter, truth, stride=(9, 9, 9), noise_mult=0.03, seed=5)
+    r = _held_result(walter, truth, data, ("f0",))
+    held = np.array([lab.startswith("f0") for lab in r.labels])
+    full = _sandwich(walter, truth, data, np.ones(held.size, bool))
+    conditional = _sandwich(walter, truth, data, ~held)
+    ix = np.ix_(~held, ~held)
+    np.testing.assert_allclose(r.covariance[ix], full[ix], rtol=1e-8)
+    assert np.all(np.isnan(r.covariance[held])) and np.all(np.isnan(r.stderr["f0"]))
+    ks = [lab.startswith("ks") for lab in np.array(r.labels)[~held]]
+    assert np.all(np.sqrt(np.diag(conditional))[ks] < 0.8 * r.stderr["ks"])
+
+
+def test_errors_beside_a_firmly_held_scalar_are_conditional_on_it():
+    """``ks`` held at its bound 1 while the data's lobe has weight 1.5: the unbounded step
+    takes it far beyond, the bound binds in every replication, and the free scalars'
+    covariance is the one conditional on the held value (over the free scalars only)."""
+    walter = models.get("walter")
+    at = {"kd": [0.2, 0.3, 0.4], "ks": [1.0] * 3, "f0": [0.3] * 3, "alpha": 0.1}
+    base = synthesize(walter, at, stride=(9, 9, 9))
+    extra = synthesize(walter, {**at, "kd": [0.0] * 3, "ks": [0.5] * 3}, stride=(9, 9, 9))
+    rng = np.random.default_rng(5)
+    values = (base.values + extra.values) * np.exp(0.03 * rng.standard_normal(base.values.shape))
+    data = Measurements.from_directions(base.wi, base.wo, values)
+    r = _held_result(walter, at, data, ("ks",))
+    held = np.array([lab.startswith("ks") for lab in r.labels])
+    conditional = _sandwich(walter, at, data, ~held)
+    np.testing.assert_allclose(r.covariance[np.ix_(~held, ~held)], conditional, rtol=1e-8)
