@@ -64,6 +64,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -234,49 +235,48 @@ def _free_covariance(
 
 
 def _marginal_covariance(
-    obj: Objective,
+    over: Callable[[np.ndarray], _Errors],
+    layout: ParameterLayout,
     z: np.ndarray,
-    padded: Prepared,
     act: np.ndarray,
-    errors: str,
-    method: str,
-    chunks: BlockChunks | None,
     moments: tuple,
-    n_data: int,
+    blocks: bool,
 ) -> tuple[_Errors, np.ndarray]:
     """The covariance the free scalars' errors come from, and the scalars it is over.
 
-    A scalar held on a bound (``~act``) may still be uncertain towards the inside. The
-    free scalars' estimate is then distributed as a mixture: of the fit with that scalar
-    held (the covariance of the free scalars alone, conditional on it) and the fit
-    without (their block of the covariance over all, the wider; Andrews 1999,
-    "Estimation when a parameter is on a boundary", Econometrica 67(6)). Which one
-    applies depends on how firmly the data hold it there: the Gauss-Newton step from
-    the answer with no bounds, ``-(J^T J)^-1 J^T e``, moves a held scalar beyond its
-    bound, and where it moves it further than :data:`FIRM` of its own standard errors
-    (a one-sided test at 2.5% that the scalar's optimum is inside), the bound binds in
-    nearly every replication and the covariance is conditional on it; otherwise the
-    scalar counts as free for the covariance. Conditioning on every held scalar
-    understates a free scalar that trades off against one the data hold loosely: on
-    measured data a lobe whose Fresnel ``f0`` is held at 1 states ``ks`` to within 10%,
-    while the fit to the other half of the same material, with ``f0`` free, moves along
-    the ``ks f0`` ridge by 10x (``benchmarks/split_halves.py``). Covariance over the
-    free ones only where that over the others has no inverse (:func:`_free_covariance`,
-    same arguments).
+    ``over(sel)``: the covariance over the scalars ``sel`` (:func:`_free_covariance`);
+    ``act`` the scalars not held on a bound; ``moments`` those at the answer ``z``, block
+    moments where ``blocks``.
+
+    A scalar held on a bound may still be uncertain towards the inside. The free
+    scalars' estimate is then distributed as a mixture: of the fit with that scalar held
+    (the covariance of the free scalars alone, conditional on it) and the fit without
+    (their block of the covariance over all, the wider; Andrews 1999, "Estimation when a
+    parameter is on a boundary", Econometrica 67(6)). Which one applies depends on how
+    firmly the data hold it there: the Gauss-Newton step from the answer with no bounds,
+    ``-(J^T J)^-1 J^T e``, moves a held scalar beyond its bound, and where it moves it
+    further than :data:`FIRM` of its own standard errors, the data reject an optimum
+    inside (one-sided, at 2.5%) and the covariance is conditional on the bound; otherwise
+    the scalar counts as free for the covariance, the least favourable case of the
+    mixture. Conditioning on every held scalar understates a free scalar that trades off
+    against one the data hold loosely: on measured data a lobe whose Fresnel ``f0`` is
+    held at 1 states ``ks`` to within 10%, while the fit to the other half of the same
+    material, with ``f0`` free, moves along the ``ks f0`` ridge by 10x
+    (``benchmarks/split_halves.py``). Over the free scalars only where the covariance
+    over more has no inverse.
     """
     if act.all():
-        return _free_covariance(obj, z, padded, act, errors, method, chunks, moments, n_data), act
+        return over(act), act
     every = np.ones_like(act)
-    e = _free_covariance(obj, z, padded, every, errors, method, chunks, moments, n_data)
+    e = over(every)
     if e.cov is None:
-        return _free_covariance(obj, z, padded, act, errors, method, chunks, moments, n_data), act
-    grad = np.asarray(moments[2]).sum(axis=0) if chunks is not None else np.asarray(moments[4])
-    x = obj.layout.from_solver(z)
-    sel = ~firmly_held(obj.layout, x, act, np.asarray(moments[0]), grad, e.cov)
-    if sel.all():
-        return e, sel
-    inner = _free_covariance(obj, z, padded, sel, errors, method, chunks, moments, n_data)
-    return (inner, sel) if inner.cov is not None else (e, every)
+        return over(act), act
+    grad = np.asarray(moments[2]).sum(axis=0) if blocks else np.asarray(moments[4])
+    firm = firmly_held(layout, layout.from_solver(z), act, np.asarray(moments[0]), grad, e.cov)
+    if not firm.any():
+        return e, every
+    inner = over(~firm)
+    return (inner, ~firm) if inner.cov is not None else (e, every)
 
 
 FIRM = 1.959963984540054
@@ -345,7 +345,11 @@ def assemble(
     losses = {k: float(v) for k, v in losses.items()}
     if ok:
         act = ~out.binding
-        e, sel = _marginal_covariance(obj, z, padded, act, errors, method, chunks, moments, n_data)
+
+        def over(sel: np.ndarray) -> _Errors:
+            return _free_covariance(obj, z, padded, sel, errors, method, chunks, moments, n_data)
+
+        e, sel = _marginal_covariance(over, layout, z, act, moments, chunks is not None)
         cond, reason, method = e.cond, e.reason, e.method
         n_blocks, fallback = e.n_blocks, e.fallback
         rss = max(e.rr, 1e-300)

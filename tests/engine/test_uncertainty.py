@@ -16,19 +16,23 @@ from brdffit.engine.objective import Objective, freeze_map
 from brdffit.engine.uncertainty import Outcome, assemble, conditioning, covariance, unidentified
 
 
-def _result_at(model, params: dict, data: Measurements, freeze: dict) -> FitResult:
-    """The FitResult of ``model`` at ``params`` (no descent): the real error path."""
+def _result_at(
+    model, params: dict, data: Measurements, freeze: dict | None = None, *,
+    held: tuple = (), errors: str = "classic",
+) -> FitResult:  # fmt: skip
+    """The FitResult of ``model`` at ``params`` (no descent): the real error path, with
+    the scalars of the parameters ``held`` held on a bound by the active set."""
     params = {k: jnp.asarray(v, float) for k, v in params.items()}
     obj = Objective.build(model, freeze_map(model, freeze, params))
     z = obj.layout.solver_vector(params)
+    binding = np.array([lab.split("[")[0] in held for lab in obj.layout.labels()], bool)
     out = Outcome(
-        z=z, status=Status.CONVERGED, binding=np.zeros(z.size, bool),
-        start=obj.params(jnp.asarray(z)), n_steps=0, n_starts=1, coarse=(0, 0),
-        robust_scale=None,
+        z=z, status=Status.CONVERGED, binding=binding, start=obj.params(jnp.asarray(z)),
+        n_steps=0, n_starts=1, coarse=(0, 0), robust_scale=None,
     )  # fmt: skip
     preps = metrics_mod.prepare_all(data, cut_deg=80.0)
     return assemble(
-        obj, metrics_mod.get_metric("low_e2"), out, preps, errors="classic", cut=80.0,
+        obj, metrics_mod.get_metric("low_e2"), out, preps, errors=errors, cut=80.0,
         source="test", t0=time.perf_counter(),
     )  # fmt: skip
 
@@ -79,24 +83,6 @@ def test_every_scalar_that_moves_along_a_null_direction_is_named():
     assert weak.tolist() == [True, True, True, False]
 
 
-def _held_result(model, params: dict, data: Measurements, held_names: tuple) -> FitResult:
-    """The FitResult of ``model`` at ``params`` with the scalars of ``held_names`` held on
-    a bound by the active set (no descent), sandwich errors."""
-    params = {k: jnp.asarray(v, float) for k, v in params.items()}
-    obj = Objective.build(model)
-    z = obj.layout.solver_vector(params)
-    held = np.array([lab.split("[")[0] in held_names for lab in obj.layout.labels()])
-    out = Outcome(
-        z=z, status=Status.CONVERGED, binding=held, start=obj.params(jnp.asarray(z)),
-        n_steps=0, n_starts=1, coarse=(0, 0), robust_scale=None,
-    )  # fmt: skip
-    preps = metrics_mod.prepare_all(data, cut_deg=80.0)
-    return assemble(
-        obj, metrics_mod.get_metric("low_e2"), out, preps, errors="sandwich", cut=80.0,
-        source="test", t0=time.perf_counter(),
-    )  # fmt: skip
-
-
 def _sandwich(model, params: dict, data: Measurements, keep: np.ndarray) -> np.ndarray:
     """``A^-1 J^T diag(e^2) J A^-1`` (``A = J^T J``) over the scalars ``keep``, from JAX's
     own Jacobian over all."""
@@ -121,7 +107,7 @@ def test_errors_beside_a_loosely_held_scalar_are_its_marginal_block():
     walter = models.get("walter")
     truth = {"kd": [0.2, 0.3, 0.4], "ks": [0.3] * 3, "f0": [1.0] * 3, "alpha": 0.1}
     data = synthesize(walter, truth, stride=(9, 9, 9), noise_mult=0.03, seed=5)
-    r = _held_result(walter, truth, data, ("f0",))
+    r = _result_at(walter, truth, data, held=("f0",), errors="sandwich")
     held = np.array([lab.startswith("f0") for lab in r.labels])
     full = _sandwich(walter, truth, data, np.ones(held.size, bool))
     conditional = _sandwich(walter, truth, data, ~held)
@@ -143,7 +129,7 @@ def test_errors_beside_a_firmly_held_scalar_are_conditional_on_it():
     rng = np.random.default_rng(5)
     values = (base.values + extra.values) * np.exp(0.03 * rng.standard_normal(base.values.shape))
     data = Measurements.from_directions(base.wi, base.wo, values)
-    r = _held_result(walter, at, data, ("ks",))
+    r = _result_at(walter, at, data, held=("ks",), errors="sandwich")
     held = np.array([lab.startswith("ks") for lab in r.labels])
     conditional = _sandwich(walter, at, data, ~held)
     np.testing.assert_allclose(r.covariance[np.ix_(~held, ~held)], conditional, rtol=1e-8)
