@@ -429,7 +429,8 @@ def _warnings(at_bound, reason, status, cond, weak_names) -> tuple[str, ...]:
     if at_bound:
         out.append(
             f"parameters at a bound: {', '.join(at_bound)}; the best fit lies on the bound, "
-            "their errors are unreliable (NaN where held on it)"
+            "their errors are unreliable (NaN where held on it; the other errors allow a "
+            "held scalar to move inside unless the data hold it there firmly)"
         )
     named = f" ({', '.join(weak_names)})" if weak_names else ""
     if reason and status is not Status.NONFINITE:
