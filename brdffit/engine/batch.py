@@ -201,17 +201,15 @@ class Engine:
         return _solve_many(obj, z, _stack(preps), self.lo, self.hi, self.tol, batch)
 
     def _robust_scales(self, z: np.ndarray, preps) -> np.ndarray:
-        """Per problem: ``robust_scale``, or the tuning constant x 1.4826 MAD of the plain
-        residuals at ``z``."""
+        """Per problem: ``robust_scale``, or :func:`brdffit.engine.robust.default_scale` of
+        the plain residuals at ``z``."""
         if self.s.robust_scale is not None:
             return np.full(z.shape[0], float(self.s.robust_scale))
         out = []
         for i in range(z.shape[0]):
             r = np.asarray(objective_mod.plain_residuals(self.obj, z[i], preps[i]))
             r = r[: 3 * preps[i].n]  # not the padding's
-            mad = 1.4826 * float(np.median(np.abs(r - np.median(r))))
-            spread = mad if mad > 0 else float(np.sqrt(np.mean(r * r)))
-            out.append(robust_mod.ROBUST_TUNING[self.s.robust] * max(spread, 1e-300))
+            out.append(robust_mod.default_scale(self.s.robust, r))
         return np.asarray(out)
 
 

@@ -20,6 +20,19 @@ from brdffit.errors import ParameterError
 ROBUST_TUNING = {"huber": 1.345, "cauchy": 2.385}
 """Tuning constants (in units of the residuals' robust sigma) for 95% efficiency."""
 
+MAD_SIGMA = 1.4826
+"""``1 / Phi^-1(3/4)``: the median absolute deviation of normal residuals times this is
+their sigma (Hampel 1974)."""
+
+
+def default_scale(kind: str, r: np.ndarray) -> float:
+    """The scale of ``kind``'s loss for the plain residuals ``r`` (host): its tuning
+    constant times their robust sigma, :data:`MAD_SIGMA` x MAD (the RMS where the MAD is
+    0, i.e. where more than half the residuals are equal)."""
+    mad = MAD_SIGMA * float(np.median(np.abs(r - np.median(r))))
+    spread = mad if mad > 0 else float(np.sqrt(np.mean(r * r)))
+    return ROBUST_TUNING[kind] * max(spread, 1e-300)
+
 
 def check_kind(kind: str | None) -> None:
     """Raise :class:`~brdffit.errors.ParameterError` unless ``kind`` is None or a key of
