@@ -62,7 +62,7 @@ class FitResult:
     ``at_bound`` (labels of the free scalars, ``alpha`` or ``kd[b]`` as in ``labels``,
     within :data:`AT_BOUND_RTOL` / :data:`AT_BOUND_ATOL` of a bound or held on it),
     ``warnings``, ``not_identified`` (labels of the free scalars the data do not pin
-    down, :func:`brdffit.engine.uncertainty.unidentified`), ``coarse_samples`` /
+    down, :func:`brdffit.engine.assembly.unidentified`), ``coarse_samples`` /
     ``coarse_steps`` (the starts' thinned stage: its sample count, 0 when the starts
     ran on all samples, and its steps summed over starts, the descents under the other
     metric for the extra start and the winner's refinement on more thinned samples

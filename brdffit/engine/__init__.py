@@ -8,7 +8,8 @@
 - ``batch``: the batched descents: starts raced and finished, for many problems at once.
 - ``settings``: the keyword arguments of a fit, checked once.
 - ``fit``: :func:`brdffit.fit` and :func:`brdffit.fit_many`.
-- ``uncertainty``: standard errors and the :class:`~brdffit.core.result.FitResult`.
+- ``uncertainty``: standard errors: the covariance of a finished descent's scalars.
+- ``assembly``: the :class:`~brdffit.core.result.FitResult` of a finished descent.
 - ``sample``: :func:`brdffit.sample`, posterior sampling with emcee.
 - ``posterior``: :class:`brdffit.Posterior`, the chains and their diagnostics.
 - ``timing``: how long a model takes to evaluate.

@@ -24,9 +24,9 @@ from brdffit.engine import lm, race, starts
 from brdffit.engine import metrics as metrics_mod
 from brdffit.engine import objective as objective_mod
 from brdffit.engine import robust as robust_mod
+from brdffit.engine.assembly import Outcome
 from brdffit.engine.objective import Objective
 from brdffit.engine.settings import Settings
-from brdffit.engine.uncertainty import Outcome
 from brdffit.util.memo import per_object
 from brdffit.util.programs import program
 

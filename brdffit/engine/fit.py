@@ -11,7 +11,8 @@
    plain optimum and every candidate are descended again under the robust loss (outliers
    can drag the plain optimum into a corner whose robust descent stays there); the
    lowest robust objective is finished on all samples;
-4. :mod:`brdffit.engine.uncertainty` turns the answer into a :class:`FitResult`.
+4. :mod:`brdffit.engine.assembly` turns the answer into a :class:`FitResult`, with
+   the errors of :mod:`brdffit.engine.uncertainty`.
 
 :func:`fit_many` fits problems of equal shape (materials, texels): on an accelerator it
 stacks them and batches every solve over them, on the CPU it runs one problem per core.
@@ -31,10 +32,10 @@ from brdffit.core.measurements import Measurements
 from brdffit.core.result import FitResult
 from brdffit.engine import lm, starts
 from brdffit.engine import metrics as metrics_mod
+from brdffit.engine.assembly import assemble
 from brdffit.engine.batch import Engine
 from brdffit.engine.objective import Objective, freeze_map, start_params
 from brdffit.engine.settings import COARSE, Freeze, Settings
-from brdffit.engine.uncertainty import assemble
 from brdffit.errors import FitError, ParameterError
 
 

@@ -1,4 +1,4 @@
-"""Uncertainties and the :class:`~brdffit.core.result.FitResult` of a finished descent.
+"""Uncertainties of a finished descent: the covariance of its free scalars.
 
 Uncertainties come from the Jacobian ``J`` of the residuals with respect to the free
 natural parameters at the optimum. ``errors="sandwich"`` (default) is the
@@ -62,19 +62,16 @@ the sandwich and the blocks need sums the descent does not keep.
 
 from __future__ import annotations
 
-import math
-import time
+import dataclasses
 from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 
-from brdffit.core.parameters import ParameterLayout, Params
-from brdffit.core.result import FitResult, Status
-from brdffit.core.result_terms import AT_BOUND_ATOL, AT_BOUND_RTOL
+from brdffit.core.parameters import ParameterLayout
 from brdffit.engine import objective as objective_mod
-from brdffit.engine.block_errors import BlockChunks, block_chunks, block_errors
-from brdffit.engine.metrics import Metric, Prepared
+from brdffit.engine.block_errors import BlockChunks, block_errors
+from brdffit.engine.metrics import Prepared
 from brdffit.engine.objective import Objective
 
 NULL_EIGEN = 1e-10
@@ -96,26 +93,6 @@ CHOICES = ("auto", *ERRORS)
 LEVEL = 0.95
 """The interval the ``"blocks"`` errors are widened for
 (:func:`~brdffit.engine.block_errors.coverage_factor`)."""
-
-
-@dataclass(frozen=True)
-class Outcome:
-    """What the engine hands over for one problem.
-
-    Fields: ``z`` the answer (solver space); ``status``; ``binding`` scalars held on a
-    bound; ``start`` natural dict of the winning start; ``n_steps`` the finishing
-    descents' tried steps; ``n_starts``; ``coarse`` (thinned sample count, 0 if none;
-    tried steps over all starts there); ``robust_scale``.
-    """
-
-    z: np.ndarray
-    status: Status
-    binding: np.ndarray
-    start: Params
-    n_steps: int
-    n_starts: int
-    coarse: tuple[int, int]
-    robust_scale: float | None
 
 
 def conditioning(jtj: np.ndarray) -> tuple[float, str | None, np.ndarray]:
@@ -180,8 +157,9 @@ def resolve(errors: str, synthetic: bool) -> str:
 
 
 @dataclass(frozen=True)
-class _Errors:
-    """The free scalars' covariance and what came with it (:func:`_free_covariance`).
+class Errors:
+    """The free scalars' covariance and what came with it (:func:`_free_covariance`,
+    :func:`errors_at`).
 
     ``cov`` None with ``reason``; ``cond`` and ``weak`` from :func:`conditioning`; ``rr``
     the plain residuals' ``r.r``; ``method`` the kind used (``"auto"`` resolved);
@@ -210,7 +188,7 @@ def _free_covariance(
     chunks: BlockChunks | None,
     moments: tuple,
     n_data: int,
-) -> _Errors:
+) -> Errors:
     """Covariance of the scalars not held on a bound (``act``) by ``method`` (``errors``
     resolved, :func:`resolve`) from the ``moments`` at the answer ``z``
     (:meth:`~brdffit.engine.objective.Objective.answer` on ``padded``: block moments where
@@ -222,26 +200,26 @@ def _free_covariance(
         jtj, rr, scores, grams = (np.asarray(a) for a in moments)
         cond, reason, weak = conditioning(jtj[ix])
         if reason is not None:
-            return _Errors(None, cond, reason, weak, float(rr), method, n_blocks)
+            return Errors(None, cond, reason, weak, float(rr), method, n_blocks)
         jtj, grams = jtj[ix], grams[:, act][:, :, act]
         cov, dof, reason = block_errors(jtj, scores[:, act], grams, LEVEL)
         if cov is not None or errors != "auto":
-            return _Errors(cov, cond, reason, weak, float(rr), method, n_blocks, dof)
+            return Errors(cov, cond, reason, weak, float(rr), method, n_blocks, dof)
         method, fallback = "sandwich", reason
         moments = objective_mod.natural_moments(obj, z, padded)
     jtj, meat, ee, rr, _ = (np.asarray(a) for a in moments)
     cov, cond, reason, weak = covariance(jtj[ix], meat[ix], float(ee), n_data, method)
-    return _Errors(cov, cond, reason, weak, float(rr), method, fallback=fallback)
+    return Errors(cov, cond, reason, weak, float(rr), method, fallback=fallback)
 
 
 def _marginal_covariance(
-    over: Callable[[np.ndarray], _Errors],
+    over: Callable[[np.ndarray], Errors],
     layout: ParameterLayout,
     z: np.ndarray,
     act: np.ndarray,
     moments: tuple,
     blocks: bool,
-) -> tuple[_Errors, np.ndarray]:
+) -> tuple[Errors, np.ndarray]:
     """The covariance the free scalars' errors come from, and the scalars it is over.
 
     ``over(sel)``: the covariance over the scalars ``sel`` (:func:`_free_covariance`);
@@ -304,183 +282,38 @@ def firmly_held(
     return ~act & (outward > FIRM * np.sqrt(np.clip(np.diag(cov), 0.0, None)))
 
 
-def assemble(
+def errors_at(
     obj: Objective,
-    m: Metric,
-    out: Outcome,
-    preps: dict[str, Prepared],
-    *,
-    padded: Prepared | None = None,
+    z: np.ndarray,
+    padded: Prepared,
+    binding: np.ndarray,
     errors: str,
-    cut: float | None,
-    source: str,
-    t0: float,
-    synthetic: bool = False,
-) -> FitResult:
-    """Uncertainties, information criteria, every metric and flags -> :class:`FitResult`
-    of a fit under ``m`` (``preps``: the data prepared for every metric; ``padded``:
-    ``preps[m.name]`` :meth:`~brdffit.engine.metrics.Prepared.padded`, made here if not given;
-    ``errors`` a kind of :data:`CHOICES`, ``synthetic`` whether the data are a model's values).
+    method: str,
+    chunks: BlockChunks | None,
+    moments: tuple,
+    n_data: int,
+) -> Errors:
+    """The errors at the answer ``z`` over every free scalar of ``obj``'s layout, those
+    held on a bound (``binding``) with no error of their own: ``cov`` NaN in their rows
+    and columns, ``dof`` NaN there, ``weak`` False there. Which covariance the others'
+    errors come from: :func:`_marginal_covariance`; arguments as :func:`_free_covariance`
+    takes them, ``method`` the kind ``errors`` resolves to (:func:`resolve`)."""
+    act = ~np.asarray(binding, bool)
 
-    The covariance's moments and every metric's loss come from one pass over the data at
-    the answer (:meth:`~brdffit.engine.objective.Objective.answer`). The other metrics
-    are padded only for their losses, at the end, sharing ``padded``'s geometry: padding
-    every metric at the start of a fit held 3 more copies of the data side through the
-    descent (SGD at full resolution: 4.3 GB peak, 3.8 GB without them)."""
-    layout, model = obj.layout, obj.model
-    prep = preps[m.name]
-    padded = prep.padded() if padded is None else padded
-    z = np.asarray(out.z)
-    params = {k: np.asarray(v) for k, v in obj.params(z).items()}
-    cov = corr = stderr = dof = None
-    cond, reason, weak_names, rss = float("nan"), None, [], float("nan")
-    n_data, n_blocks, fallback = 3 * prep.n, 0, None
-    method = resolve(errors, synthetic)
-    ok = out.status is not Status.NONFINITE
-    chunks = block_chunks(prep) if ok and method == "blocks" else None
-    # the other metrics as padded as ``padded`` (from prepare_all they are; data padded
-    # here are let go: kept, their copies would be held through every later descent)
-    sides = {k: padded if k == m.name else p.pad(padded.rows, padded) for k, p in preps.items()}
-    moments, losses = objective_mod.answer(obj, z, padded, chunks, sides)
-    losses = {k: float(v) for k, v in losses.items()}
-    if ok:
-        act = ~out.binding
+    def over(sel: np.ndarray) -> Errors:
+        return _free_covariance(obj, z, padded, sel, errors, method, chunks, moments, n_data)
 
-        def over(sel: np.ndarray) -> _Errors:
-            return _free_covariance(obj, z, padded, sel, errors, method, chunks, moments, n_data)
-
-        e, sel = _marginal_covariance(over, layout, z, act, moments, chunks is not None)
-        cond, reason, method = e.cond, e.reason, e.method
-        n_blocks, fallback = e.n_blocks, e.fallback
-        rss = max(e.rr, 1e-300)
-        labels_sel = [lab for lab, a in zip(layout.labels(), sel, strict=True) if a]
-        weak = zip(labels_sel, e.weak, act[sel], strict=True)
-        weak_names = [lab for lab, w, a in weak if w and a]
-        if e.cov is not None:
-            cov = np.full((layout.size, layout.size), np.nan)
-            cov[np.ix_(sel, sel)] = e.cov
-            cov[~act, :] = cov[:, ~act] = np.nan  # held on a bound: no error of its own
-        if e.dof is not None:
-            nu = np.full(layout.size, np.nan)
-            nu[sel] = e.dof
-            nu[~act] = np.nan
-            dof = {k: np.asarray(v) for k, v in layout.split(nu).items()}
-            dof = {p.name: dof.get(p.name, np.full(np.shape(params[p.name]), np.nan))
-                   for p in model.parameters}  # fmt: skip
-    else:
-        reason = "the fit is not finite"
-    if cov is not None:
-        sd = np.sqrt(np.clip(np.diag(cov), 0.0, None))
-        with np.errstate(invalid="ignore"):
-            corr = cov / np.outer(np.where(sd > 0, sd, 1), np.where(sd > 0, sd, 1))
-        stderr = {k: np.asarray(v) for k, v in layout.split(sd).items()}
-        stderr.update({k: np.zeros(np.shape(v)) for k, v in obj.frozen.items()})
-        stderr = {p.name: stderr[p.name] for p in model.parameters}
-        weak_names += [lab for lab in unidentified(layout, params, sd) if lab not in weak_names]
-
-    k = layout.size + 1  # + the noise variance
-    finite = math.isfinite(rss)
-    aic = n_data * math.log(rss / n_data) + 2 * k if finite else float("nan")
-    bic = n_data * math.log(rss / n_data) + k * math.log(n_data) if finite else float("nan")
-    at_bound = _at_bound(layout, params, out.binding)
-    return FitResult(
-        model=model.name,
-        options=model.options(),
-        metric=m.name,
-        params={p.name: params[p.name] for p in model.parameters},
-        init_params={k: np.asarray(v) for k, v in out.start.items()},
-        stderr=stderr,
-        covariance=cov,
-        correlation=corr,
-        labels=tuple(layout.labels()),
-        frozen=tuple(obj.frozen),
-        errors_method=method,
-        errors_reason=reason,
-        error_blocks=n_blocks,
-        error_dof=dof,
-        loss=losses[m.name],
-        losses=losses,
-        cost=0.5 * rss if finite else float("nan"),
-        n_samples=prep.n,
-        n_data=n_data,
-        n_free=layout.size,
-        aic=aic,
-        bic=bic,
-        condition_number=cond,
-        status=out.status,
-        n_steps=out.n_steps,
-        n_starts=out.n_starts,
-        wall_time=time.perf_counter() - t0,
-        cut_deg=cut,
-        source=source,
-        at_bound=at_bound,
-        warnings=_warnings(at_bound, reason, out.status, cond, weak_names)
-        + ((f"errors by sandwich, not blocks: {fallback}",) if fallback else ()),
-        not_identified=tuple(weak_names),
-        coarse_samples=out.coarse[0],
-        coarse_steps=out.coarse[1],
-        robust=obj.robust,
-        robust_scale=out.robust_scale,
-    )
-
-
-def _warnings(at_bound, reason, status, cond, weak_names) -> tuple[str, ...]:
-    out = []
-    if at_bound:
-        out.append(
-            f"parameters at a bound: {', '.join(at_bound)}; the best fit lies on the bound, "
-            "their errors are unreliable (NaN where held on it; the other errors allow a "
-            "held scalar to move inside unless the data hold it there firmly)"
-        )
-    named = f" ({', '.join(weak_names)})" if weak_names else ""
-    if reason and status is not Status.NONFINITE:
-        out.append(f"no uncertainties: {reason}; not identified{named or ' (none named)'}")
-    elif math.isfinite(cond) and cond > 1e10:
-        out.append(
-            f"J^T J is ill-conditioned ({cond:.3g}): poorly identified{named or ' (none named)'}"
-        )
-    elif weak_names:
-        out.append(
-            f"not identified by the data: {', '.join(weak_names)}; the standard error exceeds "
-            "the range the bounds allow (for a scale fitted in ln x: the value itself), so "
-            "the value is arbitrary: freeze it or leave its feature out (brdffit simplify)"
-        )
-    return tuple(out)
-
-
-def unidentified(
-    layout: ParameterLayout, params: dict[str, np.ndarray], sd: np.ndarray
-) -> list[str]:
-    """Labels of the free scalars whose standard error ``sd`` exceeds their width.
-
-    The width is the span of the bounds, or ``|x|`` for a scale the solver fits in
-    ``ln x`` (:attr:`~brdffit.core.parameters.Parameter.solver_log`) or a half-open range: a
-    one-sigma interval wider than every value the model allows (for a scale: a relative
-    error over 100%, not even the order of magnitude known) means the data do not pin
-    the scalar down. This is the test the near-null rule of :func:`covariance` cannot
-    make: it looks at ``J^T J`` scaled by its own columns, which hides a scalar whose
-    column is tiny but not zero (a tint of a lobe whose weight sits at 4e-18), while
-    its variance, ``1 / |J_j|^2`` times a well-conditioned factor, explodes (errors of
-    1e15 on a [0, 1] tint). Identified scalars have errors orders of magnitude below
-    their width, so the threshold 1 needs no tuning. ``sd`` NaN (held on a bound) is
-    left to the at-bound flag.
-    """
-    lo, hi = layout.bounds_flat()
-    x = layout.natural_vector(params)
-    span = np.isfinite(lo) & np.isfinite(hi) & ~layout.solver_log_mask()
-    with np.errstate(invalid="ignore"):
-        width = np.where(span, hi - lo, np.abs(x))
-        bad = np.isfinite(sd) & (sd > width)
-    return [lab for lab, b in zip(layout.labels(), bad, strict=True) if b]
-
-
-def _at_bound(
-    layout: ParameterLayout, params: dict[str, np.ndarray], binding: np.ndarray
-) -> tuple[str, ...]:
-    """Labels of the free scalars (``kd[b]``, ``alpha``) within :data:`AT_BOUND_RTOL` /
-    :data:`AT_BOUND_ATOL` of a bound, or held on it by the active set."""
-    lo, hi = layout.bounds_flat()
-    x = layout.natural_vector(params)
-    tol = dict(rtol=AT_BOUND_RTOL, atol=AT_BOUND_ATOL)
-    near = np.asarray(binding, bool) | np.isclose(x, lo, **tol) | np.isclose(x, hi, **tol)
-    return tuple(lab for lab, n in zip(layout.labels(), near, strict=True) if n)
+    e, sel = _marginal_covariance(over, obj.layout, z, act, moments, chunks is not None)
+    k = act.size
+    weak = np.zeros(k, bool)
+    weak[sel] = e.weak
+    cov = dof = None
+    if e.cov is not None:
+        cov = np.full((k, k), np.nan)
+        cov[np.ix_(sel, sel)] = e.cov
+        cov[~act, :] = cov[:, ~act] = np.nan
+    if e.dof is not None:
+        dof = np.full(k, np.nan)
+        dof[sel] = e.dof
+        dof[~act] = np.nan
+    return dataclasses.replace(e, cov=cov, dof=dof, weak=weak & act)

@@ -12,8 +12,9 @@ import numpy as np
 
 from brdffit import FitResult, Measurements, Status, models, synthesize
 from brdffit.engine import metrics as metrics_mod
+from brdffit.engine.assembly import Outcome, assemble, unidentified
 from brdffit.engine.objective import Objective, freeze_map
-from brdffit.engine.uncertainty import Outcome, assemble, conditioning, covariance, unidentified
+from brdffit.engine.uncertainty import conditioning, covariance
 
 
 def _result_at(
