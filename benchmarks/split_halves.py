@@ -57,13 +57,12 @@ from brdffit.engine.block_errors import (
     block_cells,
     block_chunks,
     block_covariance,
-    block_errors,
     coverage_factor,
     effective_dof,
 )
 from brdffit.engine.metrics import get_metric, keep_mask, prepare
 from brdffit.engine.objective import Objective
-from brdffit.engine.uncertainty import conditioning, covariance, firmly_held
+from brdffit.engine.uncertainty import covariance, errors_at
 from brdffit.io.load import load_measurements
 from brdffit.util.atomic import write_text
 
@@ -100,7 +99,7 @@ def errors_at_optimum(model, data: Measurements, metric: str, block_deg: float) 
     """Fit ``data``; the free scalars' values and each kind's standard errors (NaN where a
     scalar is held on a bound or a kind gives none), each from the covariance over the
     scalars the fit's own errors use (those held loosely on a bound included:
-    :func:`brdffit.engine.uncertainty.firmly_held`, judged by the blocks' errors)."""
+    :func:`brdffit.engine.uncertainty.errors_at`, with the blocks' errors)."""
     r = fit(model, data, metric, errors="blocks", cut_deg=None, throw=False)
     obj = Objective.build(model)
     z = jnp.asarray(obj.layout.solver_vector(r.params))
@@ -111,14 +110,12 @@ def errors_at_optimum(model, data: Measurements, metric: str, block_deg: float) 
     if r.stderr is None:  # no covariance at this optimum (singular J^T J): no scalar
         return x, out, nu, r
     free = np.isfinite(np.concatenate([np.ravel(r.stderr[p]) for p in r.params]))
-    jtj, meat, ee, _, grad = (np.asarray(a) for a in objective_mod.natural_moments(obj, z, prep))
     chunks = block_chunks(prep, block_deg)
     moments = objective_mod.natural_block_moments(obj, z, prep, chunks)
     _, _, scores, grams = (np.asarray(a) for a in moments)
-    act = free  # the scalars the covariance is over, as the fit's own errors choose them
-    every = block_errors(jtj, scores, grams)[0] if conditioning(jtj)[1] is None else None
-    if every is not None and not free.all():
-        act = ~firmly_held(obj.layout, x, free, jtj, grad, every)
+    # the scalars the covariance is over, as the fit's own errors choose them
+    act = errors_at(obj, z, prep, ~free, "blocks", "blocks", chunks, moments, 3 * prep.n).scalars
+    jtj, meat, ee, _, _ = (np.asarray(a) for a in objective_mod.natural_moments(obj, z, prep))
     ix = np.ix_(act, act)
     cov = covariance(jtj[ix], meat[ix], float(ee), 3 * prep.n, "sandwich")[0]
     if cov is not None:

@@ -63,6 +63,7 @@ the sandwich and the blocks need sums the descent does not keep.
 from __future__ import annotations
 
 import dataclasses
+import functools
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -164,7 +165,9 @@ class Errors:
     ``cov`` None with ``reason``; ``cond`` and ``weak`` from :func:`conditioning`; ``rr``
     the plain residuals' ``r.r``; ``method`` the kind used (``"auto"`` resolved);
     ``n_blocks`` and ``dof`` (per free scalar) for ``"blocks"``, else 0 and None;
-    ``fallback`` why ``"auto"`` fell back to ``"sandwich"``, or None.
+    ``fallback`` why ``"auto"`` fell back to ``"sandwich"``, or None; ``scalars``
+    (:func:`errors_at`) the scalars the covariance is over: the free ones and those held
+    loosely on a bound.
     """
 
     cov: np.ndarray | None
@@ -176,23 +179,23 @@ class Errors:
     n_blocks: int = 0
     dof: np.ndarray | None = None
     fallback: str | None = None
+    scalars: np.ndarray | None = None
 
 
 def _free_covariance(
-    obj: Objective,
-    z: np.ndarray,
-    padded: Prepared,
     act: np.ndarray,
     errors: str,
     method: str,
     chunks: BlockChunks | None,
     moments: tuple,
     n_data: int,
+    sandwich: Callable[[], tuple],
 ) -> Errors:
-    """Covariance of the scalars not held on a bound (``act``) by ``method`` (``errors``
-    resolved, :func:`resolve`) from the ``moments`` at the answer ``z``
-    (:meth:`~brdffit.engine.objective.Objective.answer` on ``padded``: block moments where
-    ``chunks`` are given, else the sandwich's); ``n_data`` the residuals not padding."""
+    """Covariance of the scalars ``act`` by ``method`` (``errors`` resolved,
+    :func:`resolve`) from the ``moments`` at the answer
+    (:meth:`~brdffit.engine.objective.Objective.answer`: block moments where ``chunks``
+    are given, else the sandwich's); ``n_data`` the residuals not padding; ``sandwich()``
+    the sandwich's moments where ``"auto"`` falls back to it from the blocks."""
     ix = np.ix_(act, act)
     fallback = None
     if chunks is not None:
@@ -206,7 +209,7 @@ def _free_covariance(
         if cov is not None or errors != "auto":
             return Errors(cov, cond, reason, weak, float(rr), method, n_blocks, dof)
         method, fallback = "sandwich", reason
-        moments = objective_mod.natural_moments(obj, z, padded)
+        moments = sandwich()
     jtj, meat, ee, rr, _ = (np.asarray(a) for a in moments)
     cov, cond, reason, weak = covariance(jtj[ix], meat[ix], float(ee), n_data, method)
     return Errors(cov, cond, reason, weak, float(rr), method, fallback=fallback)
@@ -250,7 +253,7 @@ def _marginal_covariance(
     if e.cov is None:
         return over(act), act
     grad = np.asarray(moments[2]).sum(axis=0) if blocks else np.asarray(moments[4])
-    firm = firmly_held(layout, layout.from_solver(z), act, np.asarray(moments[0]), grad, e.cov)
+    firm = _firmly_held(layout, layout.from_solver(z), act, np.asarray(moments[0]), grad, e.cov)
     if not firm.any():
         return e, every
     inner = over(~firm)
@@ -263,7 +266,7 @@ takes a held scalar for the errors to be conditional on it (:func:`_marginal_cov
 the normal 97.5% quantile, a one-sided test at 2.5% that its optimum is inside."""
 
 
-def firmly_held(
+def _firmly_held(
     layout: ParameterLayout,
     x: np.ndarray,
     act: np.ndarray,
@@ -297,11 +300,14 @@ def errors_at(
     held on a bound (``binding``) with no error of their own: ``cov`` NaN in their rows
     and columns, ``dof`` NaN there, ``weak`` False there. Which covariance the others'
     errors come from: :func:`_marginal_covariance`; arguments as :func:`_free_covariance`
-    takes them, ``method`` the kind ``errors`` resolves to (:func:`resolve`)."""
+    takes them, ``method`` the kind ``errors`` resolves to (:func:`resolve`); ``padded``
+    the data the ``moments`` were taken on, for the sandwich's moments where ``"auto"``
+    falls back to them (one Jacobian pass, made once)."""
     act = ~np.asarray(binding, bool)
+    sandwich = functools.cache(lambda: objective_mod.natural_moments(obj, z, padded))
 
     def over(sel: np.ndarray) -> Errors:
-        return _free_covariance(obj, z, padded, sel, errors, method, chunks, moments, n_data)
+        return _free_covariance(sel, errors, method, chunks, moments, n_data, sandwich)
 
     e, sel = _marginal_covariance(over, obj.layout, z, act, moments, chunks is not None)
     k = act.size
@@ -316,4 +322,4 @@ def errors_at(
         dof = np.full(k, np.nan)
         dof[sel] = e.dof
         dof[~act] = np.nan
-    return dataclasses.replace(e, cov=cov, dof=dof, weak=weak & act)
+    return dataclasses.replace(e, cov=cov, dof=dof, weak=weak & act, scalars=sel)
