@@ -256,7 +256,8 @@ def _table(alpha: jax.Array, p: jax.Array) -> tuple[jax.Array, jax.Array]:
     ``p`` once, in one direction each, whatever the number of tangents the caller pushes
     (a fit's Jacobian pushes one per free scalar). The dense maps hold the panels'
     block-diagonal ones: four 128 x 40 blocks kept per panel instead evaluated no faster
-    (30-34 ms for 64 walkers on 2,266 samples either way) and compiled no faster.
+    (30-34 ms for 64 walkers on 2,266 samples either way), and a fresh process's first
+    call took as long (0.69-0.80 s either way).
     """
     dtype = jnp.result_type(alpha)
     tau = jnp.broadcast_to(jnp.asarray(_PANEL_TAU, dtype), jnp.shape(alpha) + _PANEL_TAU.shape)
