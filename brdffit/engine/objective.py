@@ -190,17 +190,18 @@ class Objective(eqx.Module):
 
     def _moments(self, b: Array, e: Array, r: Array) -> tuple[Array, Array, Array, Array, Array]:
         """:meth:`natural_moments` from the compressed Jacobian ``b``, ``e`` and ``r``."""
-        # one pass over [B, diag(e) B]: its Gram matrices hold both
-        e3 = e.reshape(b.shape[:2])
-        both = jnp.concatenate([b, b * e3[:, :, None]], axis=2)
+        # one pass over [B, diag(e) B, e]: its per-channel Gram matrices hold J^T J,
+        # J^T diag(e^2) J, J^T e (the first block's products with e) and e.e
+        e3 = e.reshape(b.shape[:2])[:, :, None]
+        both = jnp.concatenate([b, b * e3, e3], axis=2)
         gram, p = channel_grams(both, both), b.shape[2]
         col = self.colouring
         return (
             col.spread_matrix(gram[:, :p, :p]),
-            col.spread_matrix(gram[:, p:, p:]),
-            e @ e,
+            col.spread_matrix(gram[:, p : 2 * p, p : 2 * p]),
+            jnp.sum(gram[:, 2 * p, 2 * p]),
             r @ r,
-            col.spread_vector(jnp.einsum("ncp,nc->cp", b, e3)),
+            col.spread_vector(gram[:, :p, 2 * p]),
         )
 
     def _block_moments(

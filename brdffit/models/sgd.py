@@ -254,7 +254,8 @@ def _table(alpha: jax.Array, p: jax.Array) -> tuple[jax.Array, jax.Array]:
     panels' Chebyshev nodes (:func:`panel_maps`). Each of shape ``alpha.shape +
     (TABLE_NODES,)``. Its own JVP rule differentiates the quadrature in ``alpha`` and
     ``p`` once, in one direction each, whatever the number of tangents the caller pushes
-    (a fit's Jacobian pushes one per free scalar). The dense maps hold the panels'
+    (a fit's Jacobian pushes one per colour of its compressed form,
+    :mod:`brdffit.engine.jacobian`: 6 for SGD's 14 scalars). The dense maps hold the panels'
     block-diagonal ones: four 128 x 40 blocks kept per panel instead evaluated no faster
     (30-34 ms for 64 walkers on 2,266 samples either way), and a fresh process's first
     call took as long (0.69-0.80 s either way).
