@@ -25,6 +25,11 @@ numpy residual's sum of squares at each answer. Ratios are scipy time / brdffit 
 
 Run: python3 benchmarks/fit_lm.py [--stride 1 1 1] [--repeats 2] [--metrics low_e2 ngan]
      [--model "walter[specular_weight=false]"] [--truth fit_lm|issue42]
+     [--keep-freed-memory]
+
+``--keep-freed-memory``: glibc set as the ``brdffit`` command sets it
+(:func:`brdffit.keep_freed_memory`), for both brdffit and scipy; without it the
+process's defaults (a script's, a notebook's).
 
 "first" is the process's first fit: with the persistent compilation cache warm (run the
 command twice; the second run's figure), that is a fresh process's first call.
@@ -300,7 +305,9 @@ def main() -> None:
     ap.add_argument("--disney", action="store_true", help="time Disney's default fit instead")
     ap.add_argument("--model", default="walter", help="a walter spec (GGX, isotropic)")
     ap.add_argument("--truth", choices=sorted(TRUTHS), default="fit_lm", help="the material")
+    ap.add_argument("--keep-freed-memory", action="store_true", help="as the command sets glibc")
     args = ap.parse_args()
+    kept = args.keep_freed_memory and brdffit.keep_freed_memory()  # before JAX runs anything
     import jax
     import scipy
 
@@ -309,7 +316,8 @@ def main() -> None:
         get_metric(name)  # a bad name exits here with the metric's error
     print(
         f"# {platform.processor() or platform.machine()}, {jax.devices()[0]}, "
-        f"jax {jax.__version__}, scipy {scipy.__version__}, python {sys.version.split()[0]}"
+        f"jax {jax.__version__}, scipy {scipy.__version__}, python {sys.version.split()[0]}, "
+        f"freed memory kept: {bool(kept)}"
     )
     if args.disney:
         disney(args.repeats)

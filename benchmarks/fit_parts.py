@@ -17,6 +17,10 @@ that compiles; the parts, timed by wrapping the engine's methods for the timed f
 
 Run: python3 benchmarks/fit_parts.py [--models lambert walter] [--metric low_e2]
      [--material blue-metallic-paint] [--stride 1 1 1] [--repeats 3]
+     [--keep-freed-memory]
+
+``--keep-freed-memory``: glibc set as the ``brdffit`` command sets it
+(:func:`brdffit.keep_freed_memory`); without it the process's defaults.
 
 Before/after: run it from a worktree of the older commit (``PYTHONPATH=<worktree>``);
 the wrapped methods exist in both. Figures: ``benchmarks/results/fit_lm.md``.
@@ -85,9 +89,14 @@ def main() -> None:
     ap.add_argument("--material", default="blue-metallic-paint")
     ap.add_argument("--stride", nargs=3, type=int, default=[1, 1, 1])
     ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--keep-freed-memory", action="store_true", help="as the command sets glibc")
     a = ap.parse_args()
+    kept = a.keep_freed_memory and brdffit.keep_freed_memory()  # before JAX runs anything
     data = measurements(a.material, tuple(a.stride))
-    print(f"# {a.material}, stride {tuple(a.stride)}, {a.metric}; {platform.machine()}")
+    print(
+        f"# {a.material}, stride {tuple(a.stride)}, {a.metric}; {platform.machine()}; "
+        f"freed memory kept: {bool(kept)}"
+    )
     print("| model | fit | finish (steps) | race | starts | result | beyond the finish | loss |")
     print("|---|---|---|---|---|---|---|---|")
     for name in a.models:

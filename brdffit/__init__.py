@@ -7,7 +7,7 @@ Public API (everything else may change): :func:`read_merl`, :func:`write_merl`,
 :func:`simplify`, :class:`Measurements`, :class:`FitResult`, :class:`Posterior`,
 :class:`Reduction`, :mod:`brdffit.models`, :mod:`brdffit.export` (:class:`Export`,
 :func:`write_exports`), :mod:`brdffit.report.figures`, :func:`write_fit_html`,
-:func:`write_sweep_html` and the error types.
+:func:`write_sweep_html`, :func:`keep_freed_memory` and the error types.
 
 Importing brdffit turns on JAX's 64-bit mode: fits run in float64 by default because
 measured BRDF values span 1e-4 to 1e4. float32 evaluation still works by passing
@@ -44,10 +44,12 @@ from brdffit.report.sweep_html import write_sweep_html
 from brdffit.selection.rank import Ranking, rank
 from brdffit.selection.reduction import Reduction
 from brdffit.selection.simplify import simplify
+from brdffit.util.allocator import keep_freed_memory
 from brdffit.util.version import __version__ as __version__
 
 __all__ = [
     "enable_compilation_cache",
+    "keep_freed_memory",
     "FitResult",
     "Posterior",
     "Ranking",

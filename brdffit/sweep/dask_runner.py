@@ -13,7 +13,12 @@ processes, as JAX is not fork-safe), and closes it after the jobs. With an addre
 (``tcp://host:8786``, e.g. a cluster that ``dask-jobqueue`` started on SLURM or PBS),
 it connects to that scheduler and leaves the cluster running. Every worker turns on
 brdffit's persistent compilation cache (:func:`brdffit.enable_compilation_cache`) when
-it starts (:class:`brdffit.sweep.dask_plugin.CompileCache`).
+it starts (:class:`brdffit.sweep.dask_plugin.CompileCache`). A LocalCluster's workers
+start with glibc set to keep freed memory for reuse
+(:data:`brdffit.util.allocator.ENVIRONMENT`, in place of Dask's own
+``MALLOC_TRIM_THRESHOLD_`` of 64 KiB, set for the opposite aim: memory given back
+soon); workers of a named scheduler get it from the plugin, for the
+threads that start after it.
 """
 
 from __future__ import annotations
@@ -24,6 +29,7 @@ from collections.abc import Callable, Sequence
 from typing import TypeVar
 
 from brdffit.errors import MissingDependencyError, ParameterError
+from brdffit.util import allocator
 
 J = TypeVar("J")
 R = TypeVar("R")
@@ -32,6 +38,7 @@ R = TypeVar("R")
 def _client(scheduler: str | None, workers: int, dashboard: str | None, timeout: float):
     """A Dask client and the LocalCluster it owns (``None`` for a named scheduler)."""
     try:
+        import dask
         from dask.distributed import Client, LocalCluster  # deferred: optional, heavy
     except ImportError as e:
         raise MissingDependencyError(
@@ -45,13 +52,19 @@ def _client(scheduler: str | None, workers: int, dashboard: str | None, timeout:
                 f"--scheduler {scheduler}: no Dask scheduler answers there ({e}); give the "
                 "address a running scheduler prints, e.g. tcp://host:8786"
             ) from None
-    cluster = LocalCluster(
-        n_workers=max(1, workers),
-        threads_per_worker=1,
-        processes=True,
-        dashboard_address=_free_port_or_any(dashboard),
-        silence_logs=logging.ERROR,
-    )
+    # set before each worker process starts, where glibc reads them (Dask's docs: only
+    # ``pre-spawn-environ`` reaches glibc); the Nanny keeps them for restarts
+    spawn = dict(dask.config.get("distributed.nanny.pre-spawn-environ", {}))
+    if allocator.wanted():
+        spawn.update(allocator.ENVIRONMENT)
+    with dask.config.set({"distributed.nanny.pre-spawn-environ": spawn}):
+        cluster = LocalCluster(
+            n_workers=max(1, workers),
+            threads_per_worker=1,
+            processes=True,
+            dashboard_address=_free_port_or_any(dashboard),
+            silence_logs=logging.ERROR,
+        )
     return Client(cluster), cluster
 
 
