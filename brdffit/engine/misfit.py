@@ -23,15 +23,6 @@ from jaxtyping import Array
 from brdffit.engine.metrics import L1_DELTA, LOG_FLOOR, METRICS, Prepared
 
 
-def differences(f_model: Array, prep: Prepared) -> Array:
-    """Unweighted differences ``T(f_model cos) - T(f_data cos)``, (N, 3), ``T`` the
-    metric's (``prep.log1p``: a conditional, so one compiled program serves every metric
-    and runs only the form it needs; a ``where`` computing both, tangents included, made
-    a walter fit at 20,234 samples take 0.23 s, against 0.16 s)."""
-    x = f_model * prep.cos_i[:, None]
-    return lax.cond(prep.log1p, _differences_of(True), _differences_of(False), x, prep)
-
-
 def residuals(f_model: Array, prep: Prepared) -> Array:
     """The flat residual vector LM minimises (``0.5 sum r^2``), length 3N.
 
@@ -75,11 +66,6 @@ def _exact(x: Array, prep: Prepared, log1p: bool, l1: bool, root: bool) -> Array
     return _reduce(_difference(x, prep, log1p), prep, l1, root)
 
 
-def _differences_of(log1p: bool):
-    """:func:`_difference` of one transform, for :func:`differences`' conditional."""
-    return functools.partial(_difference, log1p=log1p)
-
-
 def _difference(x: Array, prep: Prepared, log1p: bool) -> Array:
     """``x`` or ``ln(1 + x)`` minus the data's target: the one place it is written."""
     return (_log_side(x) if log1p else x) - prep.target
@@ -98,14 +84,13 @@ def losses(f_model: Array, cos_i: Array, sides: dict[str, Prepared]) -> dict[str
     is given (the same geometry, as :func:`prepare_all` makes it). Each metric's
     transform and form are read from :data:`METRICS` by name while tracing, not from the
     data's switches: ``f cos`` and ``ln(1 + f cos)`` are then computed once for all
-    metrics, where a conditional per metric (:func:`differences`) recomputes them
-    inside each branch. Lambert on the full MERL grid: the four losses with a
-    conditional each took 0.085 s as their own program; this way, inside the Jacobian
-    pass at the answer, they add 0.035 s to its 0.071 s. The difference from the data is
-    taken once per transform, against the first of its metrics' targets, which are
-    equal (:func:`prepare_all` shares them): the losses read memory more than they
-    compute, and each (N, 3) array they skip is 22 MB at the full grid (as their own
-    program, 51 -> 43 ms).
+    metrics, where a conditional per metric recomputes them inside each branch. Lambert
+    on the full MERL grid: the four losses with a conditional each took 0.085 s as their
+    own program; this way, inside the Jacobian pass at the answer, they add 0.035 s to
+    its 0.071 s. The difference from the data is taken once per transform, against the
+    first of its metrics' targets, which are equal (:func:`prepare_all` shares them): the
+    losses read memory more than they compute, and each (N, 3) array they skip is 22 MB
+    at the full grid (as their own program, 51 -> 43 ms).
     """
     x = f_model * cos_i[:, None]
     diffs: dict[bool, Array] = {}

@@ -102,9 +102,11 @@ def _solve_rows(obj: Objective, z0, prep: metrics.Prepared, train, lo, hi, tol):
         z = jnp.where(obj.cost(lin, p) < obj.cost(z, p), lin, z)
         d = lm.solve(obj, z, p, lo, hi, tol)
         f = obj.model.evaluate(obj.params(d.z), prep.g)
-        e = misfit.differences(f, prep)
-        e = jnp.where(prep.l1, jnp.abs(e), e * e)
-        held = jnp.sum(prep.weight * (1.0 - mask)[:, None] * e)
+        # the metric's weighted sum over the held-out cells, not its root: folds add up
+        out = dataclasses.replace(
+            prep, weight=prep.weight * (1.0 - mask)[:, None], root=jnp.zeros_like(prep.root)
+        )
+        held = misfit.loss(f, out)
         r = misfit.residuals(f, prep)
         return d.z, d.reason, held, jnp.sum(r * r), misfit.loss(f, prep)
 
