@@ -7,6 +7,11 @@ same data to compile). Prints fits per second, the ratio, and the largest relati
 loss difference between the two answers of one material.
 
 Run: python3 benchmarks/fit_many.py [--n 256] [--stride 9 9 9] [--metric low_e2]
+     [--keep-freed-memory]
+
+``--keep-freed-memory``: glibc set as the ``brdffit`` command sets it
+(:func:`brdffit.keep_freed_memory`: one heap for all threads, so ``fit_many``'s threads
+share it); without it the process's defaults.
 
 Latest figures: benchmarks/results/fit_many.md.
 """
@@ -43,7 +48,9 @@ def main() -> None:
     ap.add_argument("--n", type=int, default=256)
     ap.add_argument("--stride", type=int, nargs=3, default=(9, 9, 9))
     ap.add_argument("--metric", default="low_e2")
+    ap.add_argument("--keep-freed-memory", action="store_true", help="as the command sets glibc")
     args = ap.parse_args()
+    kept = args.keep_freed_memory and brdffit.keep_freed_memory()  # before JAX runs anything
     if args.n < 1:
         ap.error("--n: must be at least 1")
     get_metric(args.metric)
@@ -54,7 +61,8 @@ def main() -> None:
     data = materials(args.n, tuple(args.stride))
     print(
         f"# {platform.processor() or platform.machine()}, {jax.devices()[0]}, "
-        f"jax {jax.__version__}; {args.n} materials x {data[0].n} cells, {args.metric}"
+        f"jax {jax.__version__}; {args.n} materials x {data[0].n} cells, {args.metric}; "
+        f"freed memory kept: {bool(kept)}"
     )
     fit(walter, data[0], args.metric, throw=False)  # compile
     t = time.perf_counter()
