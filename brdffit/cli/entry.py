@@ -1,7 +1,7 @@
 """The ``brdffit`` console command: parse, keep freed memory for reuse
 (:func:`brdffit.util.allocator.keep_freed_memory`), turn on the compilation cache, run
-the subcommand; a :class:`~brdffit.errors.BrdffitError` or ``OSError`` becomes one line on
-stderr and exit code 2.
+the subcommand; a :class:`~brdffit.errors.BrdffitError` or ``OSError`` becomes one line
+on stderr and exit code 2.
 """
 
 from __future__ import annotations

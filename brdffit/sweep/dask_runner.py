@@ -17,8 +17,8 @@ it starts (:class:`brdffit.sweep.dask_plugin.CompileCache`). A LocalCluster's wo
 start with glibc set to keep freed memory for reuse
 (:data:`brdffit.util.allocator.ENVIRONMENT`, in place of Dask's own
 ``MALLOC_TRIM_THRESHOLD_`` of 64 KiB, set for the opposite aim: memory given back
-soon); workers of a named scheduler get it from the plugin, for the
-threads that start after it.
+soon); workers of a named scheduler get it from the plugin, for the threads that start
+after it.
 """
 
 from __future__ import annotations

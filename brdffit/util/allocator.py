@@ -3,13 +3,13 @@
 XLA on the CPU takes each program's outputs and temporary buffer from ``malloc`` at
 every call and frees them after. glibc serves a request above its mmap threshold (at
 most 32 MiB) with a fresh ``mmap`` and gives it back with ``munmap`` on ``free``, and it
-returns the free top of its heap to the kernel past a trim threshold (threads other
-than the first allocate from heaps of their own). So a program that
-needs 100 MB of buffers touches 100 MB of fresh pages on every call, and each 4 KiB page
-costs a fault and the kernel zeroing it. On a full MERL grid that is most of what a
-cheap model's linearisation costs: Lambert's, 27,000 faults and 72 ms a call, 47 ms
-without the faults (``benchmarks/results/fit_lm.md``). Dask's workers have it worse:
-Dask starts them with a trim threshold of 64 KiB.
+returns the free top of its heap to the kernel past a trim threshold (threads other than
+the first allocate from heaps of their own). So a program that needs 100 MB of buffers
+touches 100 MB of fresh pages on every call, and each 4 KiB page costs a fault and the
+kernel zeroing it. On a full MERL grid that is a third of what a cheap model's
+linearisation costs: Lambert's, 27,000 faults and 72 ms a call, 47 ms without the faults
+(``benchmarks/results/fit_lm.md``). Dask's workers have it worse: Dask starts them with
+a trim threshold of 64 KiB.
 
 The same program measured with each setting alone (scratch profile, Lambert's
 linearisation on a full MERL grid): no ``mmap`` and no trimming left the faults as they
