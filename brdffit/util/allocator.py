@@ -8,8 +8,8 @@ the first allocate from heaps of their own). So a program that needs 100 MB of b
 touches 100 MB of fresh pages on every call, and each 4 KiB page costs a fault and the
 kernel zeroing it. On a full MERL grid that is a third of what a cheap model's
 linearisation costs: Lambert's, 27,000 faults and 72 ms a call, 47 ms without the faults
-(``benchmarks/results/fit_lm.md``). Dask's workers have it worse: Dask starts them with
-a trim threshold of 64 KiB.
+(``benchmarks/results/fit_lm.md``). Dask starts its workers with a trim threshold of
+64 KiB, which gives the heap's free top back as well.
 
 The same program measured with each setting alone (scratch profile, Lambert's
 linearisation on a full MERL grid): no ``mmap`` and no trimming left the faults as they

@@ -38,7 +38,7 @@ print(applied, sorted(faults)[10])
 """
 
 
-def _faults_per_call(how: str, env: dict[str, str]) -> tuple[str, float]:
+def _median_faults(how: str, env: dict[str, str]) -> tuple[str, float]:
     """``(applied, minor page faults of the median call)`` of :data:`PROGRAM` in a fresh
     process (the median: now and then a call grows the heap, a fault for each new page)."""
     env = {k: v for k, v in os.environ.items() if not k.startswith("MALLOC_")} | env
@@ -50,20 +50,20 @@ def _faults_per_call(how: str, env: dict[str, str]) -> tuple[str, float]:
 
 
 def test_kept_memory_is_reused_without_page_faults():
-    applied, faults = _faults_per_call("call", {})
+    applied, faults = _median_faults("call", {})
     assert applied == "True"
     assert faults < 0.02 * PAGES, f"{faults:.0f} faults in the median call for {PAGES} pages"
 
 
 def test_the_environment_gives_a_new_process_the_same_settings():
-    _, faults = _faults_per_call("no", dict(allocator.ENVIRONMENT))
+    _, faults = _median_faults("no", dict(allocator.ENVIRONMENT))
     assert faults < 0.02 * PAGES, f"{faults:.0f} faults in the median call for {PAGES} pages"
 
 
 def test_without_the_settings_the_pages_fault_in_again():
     # what the settings are for: glibc maps a buffer over 32 MiB afresh at every call
     # (a kernel that backs all memory with huge pages faults far less: then skip)
-    _, faults = _faults_per_call("no", {})
+    _, faults = _median_faults("no", {})
     if faults < 0.02 * PAGES:
         pytest.skip(f"{faults:.0f} faults a call: this kernel maps huge pages by default")
     assert faults > 0.5 * PAGES
