@@ -269,7 +269,10 @@ def step(
     pred_gn = -(s.g @ sz + 0.5 * sz @ s.h @ sz)
     pred_aug = pred_gn - 0.5 * sz @ s.curv @ sz
     predicted = jnp.where(augmented, pred_aug, pred_gn)
-    c_trial = obj.cost(trial, prep)
+    # a fresh state only linearises (its step is null: g = 0): no pass for the trial's
+    # cost, whose value the ``first`` state below would discard (one pass a descent;
+    # batched by vmap the condition is a select and both branches run, as before)
+    c_trial = lax.cond(s.fresh, lambda: jnp.inf * s.lam, lambda: obj.cost(trial, prep))
     actual = s.cost - c_trial
     ok = jnp.isfinite(c_trial) & (predicted > 0) & (actual > 0)
     gain = jnp.where(ok, actual / jnp.where(predicted > 0, predicted, 1.0), 0.0)
