@@ -100,9 +100,11 @@ def block_chunks(prep: Prepared, block_deg: float = BLOCK_DEG) -> BlockChunks:
 
 def _leverages(
     jtj: np.ndarray, grams: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[tuple[np.ndarray, np.ndarray]]] | str:
-    """``d``, ``A^-1/2``, ``A^1/2`` (column-scaled) and each block's ``(l, V)`` with
-    ``A^-1/2 A_b A^-1/2 = V diag(l) V^T``; or why not (a reason string)."""
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray] | str:
+    """``d``, ``A^-1/2``, ``A^1/2`` (column-scaled) and the blocks' ``l`` (G, k) and ``V``
+    (G, k, k) with ``A^-1/2 A_b A^-1/2 = V_b diag(l_b) V_b^T``; or why not (a reason
+    string). The blocks' matrices are decomposed as one stack (a loop over blocks in
+    Python cost more than the decompositions)."""
     g = grams.shape[0]
     if g < MIN_BLOCKS:
         return f"{g} blocks for errors='blocks', fewer than {MIN_BLOCKS}"
@@ -114,13 +116,17 @@ def _leverages(
         return "J^T J is singular (errors='blocks')"
     inv_half = vec @ np.diag(ev**-0.5) @ vec.T
     half = vec @ np.diag(ev**0.5) @ vec.T
-    per = []
-    for b in range(g):
-        lev, v = np.linalg.eigh(inv_half @ (grams[b] / np.outer(d, d)) @ inv_half)
-        if not np.all(np.isfinite(lev)) or np.max(lev) > 1.0 - 1.0 / SINGULAR:
-            return f"block {b} alone identifies a direction of J^T J (errors='blocks')"
-        per.append((np.clip(lev, 0.0, None), v))
-    return d, inv_half, half, per
+    lev, v = np.linalg.eigh(inv_half @ (grams / np.outer(d, d)) @ inv_half)
+    bad = ~np.all(np.isfinite(lev), axis=1) | (np.max(lev, axis=1) > 1.0 - 1.0 / SINGULAR)
+    if np.any(bad):
+        b = int(np.argmax(bad))
+        return f"block {b} alone identifies a direction of J^T J (errors='blocks')"
+    return d, inv_half, half, np.clip(lev, 0.0, None), v
+
+
+def _spectral(v: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """``V_b diag(values_b) V_b^T`` for each block: ``v`` (G, k, k), ``values`` (G, k)."""
+    return (v * values[:, None, :]) @ np.swapaxes(v, 1, 2)
 
 
 def block_covariance(
@@ -144,12 +150,10 @@ def block_covariance(
 
 def _cluster_cov(parts: tuple, scores: np.ndarray, power: float) -> np.ndarray:
     """:func:`block_covariance` from :func:`_leverages`' parts."""
-    d, inv_half, _, per = parts
+    d, inv_half, _, lev, v = parts
     g = scores.shape[0]
-    u = np.empty_like(scores)
-    for b, (lev, v) in enumerate(per):
-        factor = v @ np.diag((1.0 - lev) ** -power) @ v.T
-        u[b] = inv_half @ factor @ inv_half @ (scores[b] / d) / d
+    factor = _spectral(v, (1.0 - lev) ** -power)  # (G, k, k)
+    u = (inv_half @ factor @ inv_half @ (scores / d)[:, :, None])[:, :, 0] / d
     cov = u.T @ u * ((g - 1) / g if power == 1.0 else 1.0)
     return 0.5 * (cov + cov.T)
 
@@ -176,18 +180,16 @@ def effective_dof(jtj: np.ndarray, grams: np.ndarray) -> np.ndarray | None:
 
 def _dof(parts: tuple, k: int) -> np.ndarray:
     """:func:`effective_dof` from :func:`_leverages`' parts."""
-    _, inv_half, half, per = parts
+    _, inv_half, half, lev, v = parts
     a_inv = inv_half @ inv_half
-    gram_terms = [v @ np.diag(lev / (1.0 - lev)) @ v.T for lev, v in per]
-    cross = [half @ v @ np.diag(lev / np.sqrt(1.0 - lev)) @ v.T for lev, v in per]
-    dof = np.empty(k)
-    for i in range(k):
-        q = inv_half[:, i]
-        gg = np.array([q @ t @ q for t in gram_terms])
-        w = np.array([c @ q for c in cross])
-        lam = np.linalg.eigvalsh(np.diag(gg) - w @ a_inv @ w.T)
-        dof[i] = lam.sum() ** 2 / np.sum(lam**2)
-    return dof
+    gram_terms = _spectral(v, lev / (1.0 - lev))  # (G, k, k)
+    cross = half @ _spectral(v, lev / np.sqrt(1.0 - lev))  # (G, k, k)
+    q = inv_half  # column i: A^-1/2 c_i
+    gg = np.einsum("ai,gab,bi->ig", q, gram_terms, q)  # (k, G)
+    w = np.einsum("gab,bi->iga", cross, q)  # (k, G, k)
+    b = np.einsum("ig,gh->igh", gg, np.eye(gg.shape[1])) - w @ a_inv @ np.swapaxes(w, 1, 2)
+    lam = np.linalg.eigvalsh(b)  # (k, G)
+    return lam.sum(axis=1) ** 2 / np.sum(lam**2, axis=1)
 
 
 def coverage_factor(dof: np.ndarray, level: float = 0.95) -> np.ndarray:
