@@ -175,10 +175,10 @@ def effective_dof(jtj: np.ndarray, grams: np.ndarray) -> np.ndarray | None:
     no covariance.
     """
     parts = _leverages(jtj, grams)
-    return None if isinstance(parts, str) else _dof(parts, jtj.shape[0])
+    return None if isinstance(parts, str) else _dof(parts)
 
 
-def _dof(parts: tuple, k: int) -> np.ndarray:
+def _dof(parts: tuple) -> np.ndarray:
     """:func:`effective_dof` from :func:`_leverages`' parts."""
     _, inv_half, half, lev, v = parts
     a_inv = inv_half @ inv_half
@@ -187,8 +187,8 @@ def _dof(parts: tuple, k: int) -> np.ndarray:
     q = inv_half  # column i: A^-1/2 c_i
     gg = np.einsum("ai,gab,bi->ig", q, gram_terms, q)  # (k, G)
     w = np.einsum("gab,bi->iga", cross, q)  # (k, G, k)
-    b = np.einsum("ig,gh->igh", gg, np.eye(gg.shape[1])) - w @ a_inv @ np.swapaxes(w, 1, 2)
-    lam = np.linalg.eigvalsh(b)  # (k, G)
+    b = gg[:, :, None] * np.eye(gg.shape[1]) - w @ a_inv @ np.swapaxes(w, 1, 2)  # (k, G, G)
+    lam = np.linalg.eigvalsh(b)
     return lam.sum(axis=1) ** 2 / np.sum(lam**2, axis=1)
 
 
@@ -208,6 +208,6 @@ def block_errors(
     parts = _leverages(jtj, grams)
     if isinstance(parts, str):
         return None, None, parts
-    dof = _dof(parts, jtj.shape[0])
+    dof = _dof(parts)
     f = coverage_factor(dof, level)
     return _cluster_cov(parts, scores, 0.5) * np.outer(f, f), dof, None
