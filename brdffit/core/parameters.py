@@ -287,6 +287,19 @@ class ParameterLayout:
             z = z.at[i].set(jnp.log(x[i]) + jnp.log(x[j])).at[j].set(1.0 / x[j])
         return z
 
+    def solver_jacobian(self, x: np.ndarray) -> np.ndarray:
+        """``d z / d x`` (k, k) of :meth:`to_solver` at the flat natural ``x`` (NumPy):
+        ``1 / x`` on the diagonal where :attr:`solver_log`, and for each pair ``(i, j)``
+        the row ``z_i = ln x_i + ln x_j`` and ``z_j = 1 / x_j``. A Jacobian in the
+        solver space times it is the Jacobian in natural units."""
+        x = np.asarray(x, float)
+        t = np.diag(np.where(self.solver_log_mask(), 1.0 / np.where(x != 0, x, 1.0), 1.0))
+        for i, j in self.pairs():
+            t[i, :] = 0.0
+            t[j, :] = 0.0
+            t[i, i], t[i, j], t[j, j] = 1.0 / x[i], 1.0 / x[j], -1.0 / x[j] ** 2
+        return t
+
     def from_solver(self, z: AnyArray) -> AnyArray:
         """Flat solver -> flat natural vector, the inverse of :meth:`to_solver` (traced, or
         NumPy in and out on the host: :func:`namespace`).

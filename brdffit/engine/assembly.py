@@ -27,7 +27,9 @@ class Outcome:
     Fields: ``z`` the answer (solver space); ``status``; ``binding`` scalars held on a
     bound; ``start`` natural dict of the winning start; ``n_steps`` the finishing
     descents' tried steps; ``n_starts``; ``coarse`` (thinned sample count, 0 if none;
-    tried steps over all starts there); ``robust_scale``.
+    tried steps over all starts there); ``robust_scale``; ``cost`` ``C(z)`` and ``kept``
+    the block sums of the last linearisation when the descent on all samples kept them
+    (:class:`~brdffit.engine.objective.WithBlockSums`; None otherwise).
     """
 
     z: np.ndarray
@@ -38,6 +40,8 @@ class Outcome:
     n_starts: int
     coarse: tuple[int, int]
     robust_scale: float | None
+    cost: float | None = None
+    kept: tuple | None = None
 
 
 def assemble(
@@ -78,7 +82,11 @@ def assemble(
     # the other metrics as padded as ``padded`` (from prepare_all they are; data padded
     # here are let go: kept, their copies would be held through every later descent)
     sides = {k: padded if k == m.name else p.pad(padded.rows, padded) for k, p in preps.items()}
-    moments, losses = objective_mod.answer(obj, z, padded, chunks, sides)
+    if chunks is not None and out.kept is not None and _unclipped(layout, z):
+        moments = objective_mod.moved_block_moments(obj, z, out.kept, out.cost)
+        losses = objective_mod.losses_at(obj, z, padded, sides)
+    else:
+        moments, losses = objective_mod.answer(obj, z, padded, chunks, sides)
     losses = {k: float(v) for k, v in losses.items()}
     if ok:
         e = errors_at(obj, z, padded, out.binding, errors, method, chunks, moments, n_data)
@@ -145,6 +153,20 @@ def assemble(
         robust=obj.robust,
         robust_scale=out.robust_scale,
     )
+
+
+def _unclipped(layout: ParameterLayout, z: np.ndarray) -> bool:
+    """No jointly solved pair (:meth:`~brdffit.core.parameters.ParameterLayout.pairs`)
+    has a member on its bound, where :meth:`~brdffit.core.parameters.ParameterLayout.from_solver`
+    clips it and the chain rule of
+    :meth:`~brdffit.core.parameters.ParameterLayout.solver_jacobian` does not hold."""
+    pairs = layout.pairs()
+    if not pairs:
+        return True
+    lo, hi = layout.bounds_flat()
+    x = layout.from_solver(np.asarray(z, float))
+    members = np.asarray([i for pair in pairs for i in pair])
+    return not np.any((x[members] <= lo[members]) | (x[members] >= hi[members]))
 
 
 def _warnings(at_bound, reason, status, cond, weak_names) -> tuple[str, ...]:

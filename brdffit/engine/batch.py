@@ -25,6 +25,7 @@ from brdffit.engine import metrics as metrics_mod
 from brdffit.engine import objective as objective_mod
 from brdffit.engine import robust as robust_mod
 from brdffit.engine.assembly import Outcome
+from brdffit.engine.block_errors import BlockChunks
 from brdffit.engine.objective import Objective
 from brdffit.engine.settings import Settings
 from brdffit.util.memo import per_object
@@ -68,7 +69,9 @@ _STATUS = {
 @dataclass(frozen=True)
 class _Stage:
     """One stage's answer per problem: point, tried steps, reason, binding scalars, the
-    index of the winning start, and the steps spent on the thinned samples."""
+    index of the winning start, the steps spent on the thinned samples, and the cost and
+    block sums the descent on all samples kept (``kept`` None when it kept none,
+    :class:`~brdffit.engine.objective.WithBlockSums`)."""
 
     z: np.ndarray
     steps: np.ndarray
@@ -76,6 +79,8 @@ class _Stage:
     binding: np.ndarray
     pick: np.ndarray
     coarse_steps: np.ndarray
+    cost: np.ndarray | None = None
+    kept: tuple | None = None
 
 
 class Engine:
@@ -86,9 +91,14 @@ class Engine:
         lo, hi = obj.layout.solver_bounds()
         self.lo, self.hi = np.asarray(lo), np.asarray(hi)
 
-    def run(self, preps: list, padded: list, first: dict) -> list[Outcome]:
+    def run(
+        self, preps: list, padded: list, first: dict, chunks: BlockChunks | None = None
+    ) -> list[Outcome]:
         """Each problem's outcome from its data ``preps`` (the fit's metric) and the same
-        :meth:`~brdffit.engine.metrics.Prepared.padded`; ``first`` the first start (natural)."""
+        :meth:`~brdffit.engine.metrics.Prepared.padded`; ``first`` the first start (natural).
+        ``chunks``: one problem's error blocks of ``padded``, for a fit that reports block
+        errors: its descent on all samples keeps their sums
+        (:class:`~brdffit.engine.objective.WithBlockSums`)."""
         s, obj = self.s, self.obj
         n_problems = len(preps)
         n_coarse = coarse_size(preps[0].n, s.coarse)
@@ -108,7 +118,7 @@ class Engine:
             zs = np.concatenate([zs, cross[:, None, :]], axis=1)
         n_mid = refine_size(preps[0].n, n_small) if thinned else None
         mid = None if n_mid is None else [_subset(p, n_mid).padded() for p in preps]
-        problems = _Problems(padded, small, thinned, mid)
+        problems = _Problems(padded, small, thinned, mid, chunks)
         rows = np.arange(n_problems)
         st = self._stage(obj, zs, problems)
         origin, steps = zs[rows, st.pick], st.steps
@@ -133,6 +143,8 @@ class Engine:
                     n_starts=zs.shape[1],
                     coarse=(n_small, int(coarse_steps[i])) if thinned else (0, 0),
                     robust_scale=scales[i],
+                    cost=None if st.kept is None else float(st.cost[i]),
+                    kept=None if st.kept is None else tuple(a[i] for a in st.kept),
                 )
             )  # fmt: skip
         return out
@@ -183,16 +195,21 @@ class Engine:
         if problems.mid is not None:
             m = self._descend(obj, z, problems.mid)
             z, thin_steps = np.asarray(m.z), thin_steps + np.asarray(m.steps)
-        f = self._descend(obj, z, problems.full)
+        chunks = problems.chunks if obj.robust is None else None
+        f = self._descend(obj, z, problems.full, chunks)
         fin = [np.asarray(a) for a in (f.z, f.steps, f.reason, f.binding)]
-        return _Stage(*fin, pick, thin_steps)
+        kept = None if chunks is None else tuple(np.asarray(a) for a in f.kept)
+        return _Stage(*fin, pick, thin_steps, np.asarray(f.cost), kept)
 
-    def _descend(self, obj, z, preps) -> lm.Descent:
+    def _descend(self, obj, z, preps, chunks: BlockChunks | None = None) -> lm.Descent:
         """Descents from ``z`` ((P, k), or (P, S, k) for many starts) on ``preps`` (one per
-        problem), with a leading problem axis; P = 1 runs unstacked."""
+        problem), with a leading problem axis; P = 1 runs unstacked. ``chunks``: one
+        problem's error blocks, whose sums its descent keeps (``z`` (1, k) only)."""
         z, batch = np.asarray(z), lm.batch_size()
         if z.shape[0] == 1:
             o = obj.with_robust(obj.robust, np.asarray(obj.scale)[0]) if obj.scale.ndim else obj
+            if chunks is not None:
+                o = objective_mod.WithBlockSums(o, chunks)
             if z.ndim == 3:
                 d = race.race_one(o, z[0], preps[0], self.lo, self.hi, self.tol, batch)
             else:
@@ -227,10 +244,14 @@ class _Problems:
     """Each problem's prepared data: all samples, the thinned ones of the starts
     (``thinned``: whether those are fewer) and the intermediate ones of the refining
     stage (``mid``, ``None`` without one, :func:`refine_size`), all
-    :meth:`~brdffit.engine.metrics.Prepared.padded`."""
+    :meth:`~brdffit.engine.metrics.Prepared.padded`; ``chunks`` the error blocks of one
+    problem whose descent on all samples keeps their sums (:meth:`Engine.run`)."""
 
-    def __init__(self, full: list, small: list, thinned: bool, mid: list | None = None):
+    def __init__(
+        self, full: list, small: list, thinned: bool, mid: list | None = None, chunks=None
+    ):
         self.full, self.small, self.thinned, self.mid = full, small, thinned, mid
+        self.chunks = chunks
 
 
 @program

@@ -34,8 +34,10 @@ from brdffit.engine import lm, starts
 from brdffit.engine import metrics as metrics_mod
 from brdffit.engine.assembly import assemble
 from brdffit.engine.batch import Engine
+from brdffit.engine.block_errors import block_chunks
 from brdffit.engine.objective import Objective, freeze_map, start_params
 from brdffit.engine.settings import COARSE, Freeze, Settings
+from brdffit.engine.uncertainty import resolve
 from brdffit.errors import FitError, ParameterError
 
 
@@ -163,7 +165,13 @@ class _Batch:
         other = starts.OTHER_METRIC[self.m.log1p]
         padded = [self.per[i][self.m.name].padded() for i in rows]
         engine = Engine(self.obj, self.s, [self.per[i][other] for i in rows])
-        outcomes = engine.run([self.per[i][self.m.name] for i in rows], padded, self.first)
+        chunks = None
+        if len(rows) == 1 and self.s.robust is None:
+            i = rows[0]
+            if resolve(self.s.errors, self.datasets[i].synthetic) == "blocks":
+                chunks = block_chunks(self.per[i][self.m.name])
+        preps = [self.per[i][self.m.name] for i in rows]
+        outcomes = engine.run(preps, padded, self.first, chunks)
         out = []
         for i, o, q in zip(rows, outcomes, padded, strict=True):
             obj = self.obj

@@ -155,7 +155,8 @@ class Descent(eqx.Module):
     (module docstring, item 5); ``lam`` and ``nu`` the damping and its growth factor;
     ``d`` Marquardt's scale; ``steps`` tried steps; ``reason`` (:class:`Reason` value);
     ``binding`` the scalars held on a bound at the end; ``fresh`` not linearised yet
-    (:func:`init`).
+    (:func:`init`); ``kept`` what the problem keeps of its last linearisation (``()``
+    unless it has ``linearize_extra``, :func:`linearize`).
     """
 
     z: Float[Array, " k"]
@@ -172,6 +173,17 @@ class Descent(eqx.Module):
     reason: Int[Array, ""]
     binding: Bool[Array, " k"]
     fresh: Bool[Array, ""]
+    kept: Any = ()
+
+
+def linearize(obj: LeastSquares, z: Array, prep: Any) -> tuple[Array, Array, Array, Any]:
+    """``(C, g, H, kept)``: :meth:`LeastSquares.linearize` and what the problem keeps of
+    it, from its ``linearize_extra`` where it has one (a pytree of arrays; ``()``
+    otherwise). The descent carries the last one it made
+    (:class:`brdffit.engine.objective.WithBlockSums`)."""
+    if hasattr(obj, "linearize_extra"):
+        return obj.linearize_extra(z, prep)
+    return (*obj.linearize(z, prep), ())
 
 
 def _binding(z: Array, g: Array, lo: Array, hi: Array) -> Array:
@@ -195,16 +207,18 @@ def init(obj: LeastSquares, z0: Array, prep: Any, lo: Array, hi: Array, tol: Tol
     ``obj``, ``prep`` and ``tol`` are those :func:`step` gets."""
     z = jnp.clip(z0, lo, hi)
     zero, one = jnp.zeros((z.size, z.size), z.dtype), jnp.ones((), z.dtype)
+    kept = jax.eval_shape(lambda: linearize(obj, z, prep)[3])
     return Descent(
         z=z, cost=jnp.inf * one, g=jnp.zeros_like(z), h=zero, curv=zero,
         augmented=jnp.zeros((), bool), slow=jnp.zeros((), bool), lam=TAU * one, nu=2.0 * one,
         d=jnp.ones_like(z), steps=jnp.zeros((), int), reason=jnp.asarray(Reason.RUNNING),
         binding=jnp.zeros(z.shape, bool), fresh=jnp.ones((), bool),
+        kept=jax.tree.map(lambda a: jnp.zeros(a.shape, a.dtype), kept),
     )  # fmt: skip
 
 
 def _linearised(
-    z: Array, cost: Array, g: Array, h: Array, lo: Array, hi: Array, tol: Tolerances
+    z: Array, cost: Array, g: Array, h: Array, kept: Any, lo: Array, hi: Array, tol: Tolerances
 ) -> Descent:
     """The state at ``z`` once its linearisation ``(cost, g, h)`` is known: Marquardt's
     scale from ``diag(h)``, damping ``TAU``, no curvature estimate, and the gradient test
@@ -220,7 +234,7 @@ def _linearised(
         z=z, cost=cost, g=g, h=h, curv=jnp.zeros_like(h), augmented=jnp.zeros((), bool),
         slow=jnp.zeros((), bool),
         lam=TAU * one, nu=2.0 * one, d=d, steps=jnp.zeros((), int), reason=reason,
-        binding=binding, fresh=jnp.zeros((), bool),
+        binding=binding, fresh=jnp.zeros((), bool), kept=kept,
     )  # fmt: skip
 
 
@@ -297,11 +311,11 @@ def step(
     moved = ok & ~small_f & ~small_x
     at = jnp.where(s.fresh, s.z, trial)
 
-    def relinearize() -> tuple[Array, Array, Array]:
-        return obj.linearize(at, prep)
+    def relinearize() -> tuple[Array, Array, Array, Any]:
+        return linearize(obj, at, prep)
 
-    cost, g, h = lax.cond(moved | s.fresh, relinearize, lambda: (s.cost, s.g, s.h))
-    first = _linearised(s.z, cost, g, h, lo, hi, tol)
+    cost, g, h, kept = lax.cond(moved | s.fresh, relinearize, lambda: (s.cost, s.g, s.h, s.kept))
+    first = _linearised(s.z, cost, g, h, kept, lo, hi, tol)
     curv = jnp.where(moved, _secant(s.curv, sz, s.g, g, h), s.curv)
     cost = jnp.where(ok, c_trial, cost)
     finite = jnp.all(jnp.isfinite(g)) & jnp.all(jnp.isfinite(h))
@@ -316,8 +330,9 @@ def step(
         Reason.RUNNING,
     )
     new = Descent(
-        z, cost, g, h, curv, next_aug, slow, lam, nu, dscale, steps, reason, binding, s.fresh
-    )
+        z, cost, g, h, curv, next_aug, slow, lam, nu, dscale, steps, reason, binding, s.fresh,
+        kept,
+    )  # fmt: skip
     return jax.tree.map(lambda a, b: jnp.where(s.fresh, a, b), first, new)
 
 

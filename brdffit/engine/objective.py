@@ -208,6 +208,12 @@ class Objective(eqx.Module):
         self, b: Array, e: Array, r: Array, chunks: BlockChunks
     ) -> tuple[Array, Array, Array, Array]:
         """:meth:`natural_block_moments` from the compressed Jacobian ``b``, ``e`` and ``r``."""
+        scores, grams = self._block_sums(b, e, chunks)
+        return jnp.sum(grams, axis=0), r @ r, scores, grams
+
+    def _block_sums(self, b: Array, e: Array, chunks: BlockChunks) -> tuple[Array, Array]:
+        """Per block ``J_b^T e_b`` (b, k) and ``J_b^T J_b`` (b, k, k) from the compressed
+        Jacobian ``b`` of the residuals ``e``, chunk by chunk (:class:`BlockChunks`)."""
         n, _, p = b.shape
         col = self.colouring
         b0 = jnp.concatenate([b, jnp.zeros((1, 3, p), b.dtype)])  # row n pads short chunks
@@ -220,7 +226,20 @@ class Objective(eqx.Module):
         score_c, gram_c = jax.lax.map(sums, chunks.index, batch_size=8)
         scores = jax.ops.segment_sum(score_c, chunks.block, chunks.n_blocks)
         grams = col.spread_matrix(jax.ops.segment_sum(gram_c, chunks.block, chunks.n_blocks))
-        return jnp.sum(grams, axis=0), r @ r, col.spread_vector(scores), grams
+        return col.spread_vector(scores), grams
+
+    def linearize_blocks(
+        self, z: Float[Array, " k"], prep: Prepared, chunks: BlockChunks
+    ) -> tuple[Array, Array, Array, tuple[Array, Array]]:
+        """``(C, g, H, (scores, grams))`` at ``z`` in the solver space, without a robust
+        loss: the normal equations as the sums over blocks of each block's score
+        ``J_b^T r_b`` and Gram matrix ``J_b^T J_b``, which are kept. They cost what
+        :meth:`linearize` does (walter at full resolution, best of 9: 117-149 against
+        118-120 ms; Lambert 26-28 against 35 ms), and the block errors at the answer need
+        no Jacobian pass of their own (:class:`WithBlockSums`)."""
+        b, r = self._compressed(z, prep)
+        scores, grams = self._block_sums(b, r, chunks)
+        return 0.5 * (r @ r), jnp.sum(scores, axis=0), jnp.sum(grams, axis=0), (scores, grams)
 
     def _compressed(self, z: Array, prep: Prepared) -> tuple[Array, Array]:
         """``(B, r)``: the plain residuals' compressed Jacobian in the solver space
@@ -241,6 +260,53 @@ class Objective(eqx.Module):
 
         e, (r, f), b = compressed(robust, layout.from_solver(z), self.colouring)
         return b, e, r, f
+
+
+class WithBlockSums(eqx.Module):
+    """An objective without a robust loss whose every linearisation also keeps the
+    blocks' scores and Gram matrices (:meth:`Objective.linearize_blocks`).
+
+    The descent on all samples solves it when the fit reports block errors: its last
+    linearisation then holds what :meth:`Objective.natural_block_moments` would compute
+    again at the answer (:func:`moved_block_moments`), and the pass at the answer only
+    computes the losses (:func:`losses_at`). ``linearize_extra`` is what
+    :func:`brdffit.engine.lm.step` keeps of a linearisation: its point and the sums."""
+
+    obj: Objective
+    chunks: BlockChunks
+
+    def cost(self, z: Array, prep: Prepared) -> Array:
+        return self.obj.cost(z, prep)
+
+    def linearize(self, z: Array, prep: Prepared) -> tuple[Array, Array, Array]:
+        return self.linearize_extra(z, prep)[:3]
+
+    def linearize_extra(self, z: Array, prep: Prepared):
+        c, g, h, (scores, grams) = self.obj.linearize_blocks(z, prep, self.chunks)
+        return c, g, h, (z, scores, grams)
+
+
+def moved_block_moments(
+    obj: Objective, z: np.ndarray, kept: tuple, cost: float
+) -> tuple[np.ndarray, float, np.ndarray, np.ndarray]:
+    """:meth:`Objective.natural_block_moments` at the answer ``z`` from the block sums a
+    descent kept at its last linearisation (``kept``: its point, scores and Gram matrices
+    in the solver space) and the cost ``C(z)`` (no robust loss: ``r.r = 2 C``).
+
+    To natural units by the chain rule (``J_x = J_z dz/dx``,
+    :meth:`~brdffit.core.parameters.ParameterLayout.solver_jacobian`), then moved from the
+    point of the linearisation to the answer to first order, ``s_b + A_b (x - x_lin)``
+    (exact for a model linear in its parameters). The descent stops when a step changes
+    the cost or the point by less than its tolerances, so the answer is that one step
+    from the linearisation or the linearisation itself (MINPACK's convention keeps
+    ``J`` there unmoved)."""
+    layout = obj.layout
+    z_lin, scores, grams = (np.asarray(a, float) for a in kept)
+    x_lin, x = layout.from_solver(z_lin), layout.from_solver(np.asarray(z, float))
+    t = layout.solver_jacobian(x_lin)
+    grams_n = t.T @ grams @ t
+    scores_n = scores @ t + grams_n @ (x - x_lin)
+    return np.sum(grams_n, axis=0), 2.0 * float(cost), scores_n, grams_n
 
 
 @program
@@ -271,6 +337,14 @@ def block_moments(obj: Objective, z: Array, prep: Prepared, chunks: BlockChunks)
 def natural_block_moments(obj: Objective, z: Array, prep: Prepared, chunks: BlockChunks):
     """Jitted :meth:`Objective.natural_block_moments`."""
     return obj.natural_block_moments(z, prep, chunks)
+
+
+@program
+def losses_at(obj: Objective, z: Array, prep: Prepared, sides: dict):
+    """Every metric's loss at ``z`` (:func:`brdffit.engine.misfit.losses`; ``sides`` as
+    :meth:`Objective.answer` takes them): the pass at the answer when the covariance's
+    moments come from the descent (:class:`WithBlockSums`)."""
+    return misfit.losses(obj.model.evaluate(obj.params(z), prep.g), prep.cos_i, sides)
 
 
 @program

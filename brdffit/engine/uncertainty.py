@@ -53,11 +53,18 @@ it made disney's, whose scalars trade off against a loosely held ``subsurface`` 
 ``benchmarks/results/calibration_lm100.md`` is unchanged, scalar for scalar.
 
 Only k x k matrices (``J^T J`` and ``J^T diag(r^2) J``; for ``"blocks"``, ``J^T J`` and
-the blocks' scores and Gram matrices) reach numpy. They are formed on the device by
+the blocks' scores and Gram matrices) reach numpy. For ``"blocks"`` without a robust loss
+they come from the descent itself: every linearisation of the descent on all samples
+takes the normal equations as sums over the blocks and keeps those sums
+(:class:`~brdffit.engine.objective.WithBlockSums`), and the ones of its last
+linearisation are moved to the answer to first order
+(:func:`~brdffit.engine.objective.moved_block_moments`; the descent stops when a step
+is below its tolerances: on 18 models x 2 metrics, one NBRDF material at stride 3 3 5,
+the standard errors agree with a Jacobian pass at the answer to 3e-5 relative, most to
+1e-6). Otherwise they are formed on the device by
 :meth:`brdffit.engine.objective.Objective.answer`, from one Jacobian pass at the answer
-that also gives every metric's loss: the descent's last linearisation is not at the
-answer (a descent that stops after an accepted step does not linearise there again), and
-the sandwich and the blocks need sums the descent does not keep.
+that also gives every metric's loss: the sandwich needs per-sample sums the descent does
+not keep.
 """
 
 from __future__ import annotations

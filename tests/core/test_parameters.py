@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -136,3 +137,14 @@ def test_product_with_needs_a_positive_scalar():
         Parameter("C", (3,), (1e-3, 10.0), 1.0, "log", "x", product_with="B")
     with pytest.raises(ParameterError, match="product_with"):
         Parameter("C", (), (0.0, 10.0), 1.0, "logit", "x", product_with="B")
+
+
+@settings(max_examples=25, deadline=None)
+@given(b=st.floats(0.1, 1e8), c=st.floats(1e-3, 10.0), kd=st.floats(0.01, 0.9))
+def test_the_solver_jacobian_is_the_derivative_of_to_solver(b, c, kd):
+    # a pair (Löw's B, C), log scales and plain scalars: d z / d x against JAX's
+    lay = _low_layout()
+    params = models.get("low").defaults() | {"B": b, "C": c, "kd": [kd, 0.5 * kd, 0.2]}
+    x = lay.natural_vector(params)
+    want = np.asarray(jax.jacfwd(lay.to_solver)(jnp.asarray(x)))
+    np.testing.assert_allclose(lay.solver_jacobian(x), want, rtol=1e-12, atol=1e-300)

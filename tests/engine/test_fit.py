@@ -21,6 +21,8 @@ from brdffit import (
     models,
     synthesize,
 )
+from brdffit.engine import assembly
+from brdffit.engine import objective as objective_mod
 from brdffit.engine.batch import Engine, _subset, coarse_size, refine_size
 from brdffit.engine.fit import require_measurements
 from brdffit.engine.metrics import get_metric, prepare, prepare_all, shape_bucket
@@ -202,10 +204,10 @@ def test_coarse_starts_then_all_samples_reach_the_same_optimum(
     single: list[int] = []  # padded sample counts of the one-start descents
     descend = Engine._descend
 
-    def spy(self, obj, z, preps):
+    def spy(self, obj, z, preps, *rest):
         if np.ndim(z) == 2:
             single.append(preps[0].rows)
-        return descend(self, obj, z, preps)
+        return descend(self, obj, z, preps, *rest)
 
     monkeypatch.setattr(Engine, "_descend", spy)
     thin = fit(walter, data, "low_e2", coarse=coarse, n_restarts=0)
@@ -393,3 +395,30 @@ def test_other_tolerances_and_step_budget_reuse_the_compiled_descents(walter):
     assert first.converged and second.converged
     solver = {"race", "select_one", "solve_one", "linear_start_one", "answer"}
     assert not solver & set(names), names
+
+
+def test_block_errors_from_the_sums_the_descent_kept_match_a_pass_at_the_answer(
+    walter, monkeypatch
+):
+    # the descent on all samples keeps each block's score and Gram matrix at its last
+    # linearisation; moved to the answer to first order they give the errors that a
+    # Jacobian pass at the answer gives, to the step's size (below the tolerances)
+    data = synthesize(walter, TRUTH, stride=GRID, noise_mult=0.05, seed=3)
+    calls: list[str] = []
+    answer, losses_at = objective_mod.answer, objective_mod.losses_at
+    monkeypatch.setattr(objective_mod, "answer", lambda *a: calls.append("answer") or answer(*a))
+    monkeypatch.setattr(
+        objective_mod, "losses_at", lambda *a: calls.append("losses") or losses_at(*a)
+    )
+    kept = fit(walter, data, "low_e2", errors="blocks")
+    assert calls == ["losses"]
+    monkeypatch.setattr(assembly, "_unclipped", lambda layout, z: False)
+    again = fit(walter, data, "low_e2", errors="blocks")
+    assert calls == ["losses", "answer"]
+    assert kept.errors_method == again.errors_method == "blocks"
+    assert kept.n_steps == again.n_steps and kept.loss == again.loss
+    assert kept.cost == pytest.approx(again.cost, rel=1e-12)
+    for name in TRUTH:
+        np.testing.assert_allclose(kept.stderr[name], again.stderr[name], rtol=1e-4)
+        np.testing.assert_allclose(kept.error_dof[name], again.error_dof[name], rtol=1e-4)
+    np.testing.assert_allclose(kept.covariance, again.covariance, rtol=1e-3, atol=1e-12)
