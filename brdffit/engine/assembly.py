@@ -64,7 +64,10 @@ def assemble(
     whether the data are a model's values).
 
     The covariance's moments and every metric's loss come from one pass over the data at
-    the answer (:meth:`~brdffit.engine.objective.Objective.answer`). The other metrics
+    the answer (:meth:`~brdffit.engine.objective.Objective.answer`); block errors from the
+    sums the descent kept (``out.kept``, :func:`~brdffit.engine.objective.moved_block_moments`)
+    and then the pass computes the losses only
+    (:func:`~brdffit.engine.objective.losses_at`). The other metrics
     are padded only for their losses, at the end, sharing ``padded``'s geometry: padding
     every metric at the start of a fit held 3 more copies of the data side through the
     descent (SGD at full resolution: 4.3 GB peak, 3.8 GB without them)."""

@@ -178,9 +178,9 @@ class Descent(eqx.Module):
 
 def linearize(obj: LeastSquares, z: Array, prep: Any) -> tuple[Array, Array, Array, Any]:
     """``(C, g, H, kept)``: :meth:`LeastSquares.linearize` and what the problem keeps of
-    it, from its ``linearize_extra`` where it has one (a pytree of arrays; ``()``
-    otherwise). The descent carries the last one it made
-    (:class:`brdffit.engine.objective.WithBlockSums`)."""
+    it, from its ``linearize_extra`` where it has one (a pytree of arrays, whose zeros
+    its ``nothing_kept(z)`` gives for :func:`init`; ``()`` otherwise). The descent
+    carries the last one it made (:class:`brdffit.engine.objective.WithBlockSums`)."""
     if hasattr(obj, "linearize_extra"):
         return obj.linearize_extra(z, prep)
     return (*obj.linearize(z, prep), ())
@@ -207,13 +207,13 @@ def init(obj: LeastSquares, z0: Array, prep: Any, lo: Array, hi: Array, tol: Tol
     ``obj``, ``prep`` and ``tol`` are those :func:`step` gets."""
     z = jnp.clip(z0, lo, hi)
     zero, one = jnp.zeros((z.size, z.size), z.dtype), jnp.ones((), z.dtype)
-    kept = jax.eval_shape(lambda: linearize(obj, z, prep)[3])
+    kept = obj.nothing_kept(z) if hasattr(obj, "nothing_kept") else ()
     return Descent(
         z=z, cost=jnp.inf * one, g=jnp.zeros_like(z), h=zero, curv=zero,
         augmented=jnp.zeros((), bool), slow=jnp.zeros((), bool), lam=TAU * one, nu=2.0 * one,
         d=jnp.ones_like(z), steps=jnp.zeros((), int), reason=jnp.asarray(Reason.RUNNING),
         binding=jnp.zeros(z.shape, bool), fresh=jnp.ones((), bool),
-        kept=jax.tree.map(lambda a: jnp.zeros(a.shape, a.dtype), kept),
+        kept=kept,
     )  # fmt: skip
 
 

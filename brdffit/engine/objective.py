@@ -285,6 +285,11 @@ class WithBlockSums(eqx.Module):
         c, g, h, (scores, grams) = self.obj.linearize_blocks(z, prep, self.chunks)
         return c, g, h, (z, scores, grams)
 
+    def nothing_kept(self, z: Array) -> tuple[Array, Array, Array]:
+        """Zeros shaped as :meth:`linearize_extra` keeps, for a state not linearised yet."""
+        k, b = z.size, self.chunks.n_blocks
+        return jnp.zeros_like(z), jnp.zeros((b, k), z.dtype), jnp.zeros((b, k, k), z.dtype)
+
 
 def moved_block_moments(
     obj: Objective, z: np.ndarray, kept: tuple, cost: float
