@@ -275,6 +275,10 @@ class WithBlockSums(eqx.Module):
     obj: Objective
     chunks: BlockChunks
 
+    def __check_init__(self) -> None:
+        if self.obj.robust is not None:  # its normal equations carry the IRLS weights
+            raise ValueError(f"WithBlockSums takes no robust loss ({self.obj.robust!r})")
+
     def cost(self, z: Array, prep: Prepared) -> Array:
         return self.obj.cost(z, prep)
 
