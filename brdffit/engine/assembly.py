@@ -85,11 +85,13 @@ def assemble(
     # the other metrics as padded as ``padded`` (from prepare_all they are; data padded
     # here are let go: kept, their copies would be held through every later descent)
     sides = {k: padded if k == m.name else p.pad(padded.rows, padded) for k, p in preps.items()}
-    if chunks is not None and out.kept is not None and _unclipped(layout, z):
+    moments = None
+    if chunks is not None and out.kept is not None:
         moments = objective_mod.moved_block_moments(obj, z, out.kept, out.cost)
-        losses = objective_mod.losses_at(obj, z, padded, sides)
-    else:
+    if moments is None:
         moments, losses = objective_mod.answer(obj, z, padded, chunks, sides)
+    else:
+        losses = objective_mod.losses_at(obj, z, padded, sides)
     losses = {k: float(v) for k, v in losses.items()}
     if ok:
         e = errors_at(obj, z, padded, out.binding, errors, method, chunks, moments, n_data)
@@ -156,20 +158,6 @@ def assemble(
         robust=obj.robust,
         robust_scale=out.robust_scale,
     )
-
-
-def _unclipped(layout: ParameterLayout, z: np.ndarray) -> bool:
-    """No jointly solved pair (:meth:`~brdffit.core.parameters.ParameterLayout.pairs`)
-    has a member on its bound, where :meth:`~brdffit.core.parameters.ParameterLayout.from_solver`
-    clips it and the chain rule of
-    :meth:`~brdffit.core.parameters.ParameterLayout.solver_jacobian` does not hold."""
-    pairs = layout.pairs()
-    if not pairs:
-        return True
-    lo, hi = layout.bounds_flat()
-    x = layout.from_solver(np.asarray(z, float))
-    members = np.asarray([i for pair in pairs for i in pair])
-    return not np.any((x[members] <= lo[members]) | (x[members] >= hi[members]))
 
 
 def _warnings(at_bound, reason, status, cond, weak_names) -> tuple[str, ...]:

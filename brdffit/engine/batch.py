@@ -195,10 +195,9 @@ class Engine:
         if problems.mid is not None:
             m = self._descend(obj, z, problems.mid)
             z, thin_steps = np.asarray(m.z), thin_steps + np.asarray(m.steps)
-        chunks = problems.chunks if obj.robust is None else None
-        f = self._descend(obj, z, problems.full, chunks)
+        f = self._descend(obj, z, problems.full, problems.chunks)
         fin = [np.asarray(a) for a in (f.z, f.steps, f.reason, f.binding)]
-        kept = None if chunks is None else tuple(np.asarray(a) for a in f.kept)
+        kept = None if problems.chunks is None else tuple(np.asarray(a) for a in f.kept)
         return _Stage(*fin, pick, thin_steps, np.asarray(f.cost), kept)
 
     def _descend(self, obj, z, preps, chunks: BlockChunks | None = None) -> lm.Descent:

@@ -297,7 +297,7 @@ class WithBlockSums(eqx.Module):
 
 def moved_block_moments(
     obj: Objective, z: np.ndarray, kept: tuple, cost: float
-) -> tuple[np.ndarray, float, np.ndarray, np.ndarray]:
+) -> tuple[np.ndarray, float, np.ndarray, np.ndarray] | None:
     """:meth:`Objective.natural_block_moments` at the answer ``z`` from the block sums a
     descent kept at its last linearisation (``kept``: its point, scores and Gram matrices
     in the solver space) and the cost ``C(z)`` (no robust loss: ``r.r = 2 C``).
@@ -308,10 +308,19 @@ def moved_block_moments(
     (exact for a model linear in its parameters). The descent stops when a step changes
     the cost or the point by less than its tolerances, so the answer is that one step
     from the linearisation or the linearisation itself (MINPACK's convention keeps
-    ``J`` there unmoved)."""
+    ``J`` there unmoved).
+
+    None where a jointly solved pair has a member on its bound: there
+    :meth:`~brdffit.core.parameters.ParameterLayout.from_solver` clips it and the chain
+    rule does not hold (the caller then takes the moments from a pass at the answer)."""
     layout = obj.layout
     z_lin, scores, grams = (np.asarray(a, float) for a in kept)
     x_lin, x = layout.from_solver(z_lin), layout.from_solver(np.asarray(z, float))
+    members = [i for pair in layout.pairs() for i in pair]
+    if members:
+        lo, hi = layout.bounds_flat()
+        if np.any((x[members] <= lo[members]) | (x[members] >= hi[members])):
+            return None
     t = layout.solver_jacobian(x_lin)
     grams_n = t.T @ grams @ t
     scores_n = scores @ t + grams_n @ (x - x_lin)

@@ -21,7 +21,6 @@ from brdffit import (
     models,
     synthesize,
 )
-from brdffit.engine import assembly
 from brdffit.engine import objective as objective_mod
 from brdffit.engine.batch import Engine, _subset, coarse_size, refine_size
 from brdffit.engine.fit import require_measurements
@@ -412,11 +411,14 @@ def test_block_errors_from_the_sums_the_descent_kept_match_a_pass_at_the_answer(
     )
     kept = fit(walter, data, "low_e2", errors="blocks")
     assert calls == ["losses"]
-    monkeypatch.setattr(assembly, "_unclipped", lambda layout, z: False)
+    monkeypatch.setattr(objective_mod, "moved_block_moments", lambda *a: None)
     again = fit(walter, data, "low_e2", errors="blocks")
     assert calls == ["losses", "answer"]
     assert kept.errors_method == again.errors_method == "blocks"
-    assert kept.n_steps == again.n_steps and kept.loss == again.loss
+    # the same point; the loss from another program (losses_at, answer): to rounding
+    assert kept.n_steps == again.n_steps
+    np.testing.assert_array_equal(kept.params["alpha"], again.params["alpha"])
+    assert kept.loss == pytest.approx(again.loss, rel=1e-14)
     assert kept.cost == pytest.approx(again.cost, rel=1e-12)
     for name in TRUTH:
         np.testing.assert_allclose(kept.stderr[name], again.stderr[name], rtol=1e-4)
