@@ -253,11 +253,12 @@ def merl_subgrid(data: Measurements, stride: tuple[int, ...] | int) -> Measureme
       :func:`brdffit.io.merl.read_merl`.
     - ``stride``: as in :func:`merl_grid`.
 
-    Returns: :class:`Measurements` with ``grid=None`` (unless the stride is 1).
+    Returns: :class:`Measurements` with ``grid=None`` (unless the stride is 1), synthetic
+    when ``data`` is (the picked cells are still a model's own values).
     """
     require_full_table(data, "merl_subgrid")
     g = merl_grid(stride)
-    return grid_measurements(
+    sub = grid_measurements(
         g,
         data.values[g.index],
         data.channel_valid[g.index],
@@ -265,6 +266,7 @@ def merl_subgrid(data: Measurements, stride: tuple[int, ...] | int) -> Measureme
         data.channel_scales,
         data.zenith_cut_deg,
     )
+    return sub.replace(synthetic=data.synthetic)
 
 
 def require_full_table(data: Measurements, what: str) -> None:

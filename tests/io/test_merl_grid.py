@@ -91,6 +91,15 @@ def test_subgrid_picks_bin_centres_of_the_full_table():
     np.testing.assert_array_equal(sub.theta_d, table.theta_d[g.index])
     np.testing.assert_array_equal(sub.wi, table.wi[g.index])
     np.testing.assert_array_equal(sub.weights, g.weights)
+    assert not sub.synthetic
+
+
+def test_subgrid_of_synthetic_data_stays_synthetic():
+    """A model's own values, picked on a sub-grid, are still that model's: the fit's
+    default errors (``errors="auto"``) must not switch to the measured-data kind."""
+    table = _id_table().replace(synthetic=True)
+    assert merl_subgrid(table, (5, 5, 5)).synthetic
+    assert merl_subgrid(table, 1).synthetic
 
 
 def test_grid_measurements_marks_non_finite_invalid():
