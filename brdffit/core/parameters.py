@@ -106,7 +106,7 @@ class Parameter:
     @property
     def size(self) -> int:
         """Number of scalars in the parameter (1 or 3)."""
-        return int(np.prod(self.shape, dtype=int))
+        return math.prod(self.shape)
 
     @property
     def saturates(self) -> bool:
@@ -332,10 +332,17 @@ class ParameterLayout:
     def solver_vector(self, params: Mapping[str, object]) -> np.ndarray:
         """Natural dict -> flat solver-space vector of the free parameters, clipped into
         the box (numpy: starts are made on the host)."""
-        x = np.clip(self.natural_vector(params), *self.bounds_flat())
+        return self.solver_rows([params])[0]
+
+    def solver_rows(self, params: Sequence[Mapping[str, object]]) -> np.ndarray:
+        """Natural dicts -> (n, k) solver-space rows, each as :meth:`solver_vector`; the
+        box, the log mask and the pairs looked up once for all rows (a fit's 30-odd
+        candidate starts)."""
+        nat = [self.natural_vector(p) for p in params]
+        x = np.clip(np.stack(nat) if nat else np.zeros((0, self.size)), *self.bounds_flat())
         z = np.where(self.solver_log_mask(), np.log(np.maximum(x, 1e-300)), x)
         for i, j in self.pairs():
-            z[i], z[j] = np.log(x[i]) + np.log(x[j]), 1.0 / x[j]
+            z[:, i], z[:, j] = np.log(x[:, i]) + np.log(x[:, j]), 1.0 / x[:, j]
         return z
 
     def natural_vector(self, params: Mapping[str, object]) -> np.ndarray:

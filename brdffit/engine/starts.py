@@ -181,5 +181,5 @@ def select_one(obj: Objective, near: jax.Array, spread: jax.Array, prep: Prepare
 
 
 def _stack(layout: ParameterLayout, params: list[dict[str, object]]) -> np.ndarray:
-    """Natural dicts -> (n, k) solver-space rows (:meth:`ParameterLayout.solver_vector`)."""
-    return np.stack([layout.solver_vector(p) for p in params]).reshape(len(params), layout.size)
+    """Natural dicts -> (n, k) solver-space rows (:meth:`ParameterLayout.solver_rows`)."""
+    return layout.solver_rows(params)

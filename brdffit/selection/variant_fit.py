@@ -62,8 +62,7 @@ def fit_variant(
     loss over all folds (its square root when the metric is a ``root`` one)."""
     obj = Objective.build(model, freeze, robust, scale)
     lay = obj.layout
-    z0 = np.stack([lay.solver_vector({k: v[r] for k, v in rows.items()})
-                   for r in range(train.shape[0])])  # fmt: skip
+    z0 = lay.solver_rows([{k: v[r] for k, v in rows.items()} for r in range(train.shape[0])])
     lo, hi = (jnp.asarray(b) for b in lay.solver_bounds())
     z, reason, held, rss, loss = _solve_rows(obj, jnp.asarray(z0), prep, train, lo, hi, tol)
     out = [obj.params(zr) for zr in z]
