@@ -1,4 +1,4 @@
-"""Compiled programs kept across processes: the fit's jitted functions exported ahead of time.
+"""Compiled programs kept across processes: the fit's jitted functions compiled ahead of time.
 
 JAX's persistent compilation cache (:func:`brdffit.util.jax_config.enable_compilation_cache`)
 skips XLA's compile in a new process, but not the Python tracing and the lowering to
@@ -7,11 +7,18 @@ StableHLO that compute its key: at 20,234 samples a fresh process spent about 1.
 
 A :class:`Program` is ``eqx.filter_jit`` with a second, on-disk level: the first time a
 configuration is met (the function, the static part of its arguments, the shapes and
-dtypes of the arrays) it is traced once, exported with :func:`jax.export.export` (the
-StableHLO module, serialised) and written into the cache folder, beside the executables;
-a later process reads the module back and calls it, so it is neither traced nor lowered
-again, and XLA's executable comes from the persistent cache. Without the persistent
-cache (the default for the Python API and the test suite) a :class:`Program` is a plain
+dtypes of the arrays) it is traced, lowered and compiled once ahead of time, and the
+executable is serialised (:mod:`jax.experimental.serialize_executable`) into the cache
+folder; a later process loads it and calls it, so it is neither traced, lowered nor
+looked up in XLA's cache again. Storing the exported StableHLO instead
+(:func:`jax.export.export`), as this module did first, still lowered each program in
+the new process and looked it up in XLA's cache: 65 and 121 ms of a 0.33 s first fit
+at 20,234 samples, against 0.19-0.20 s for the whole fit now. One exception: an
+executable that XLA's cache returned (the same program compiled before under another
+key, such as an earlier version of brdffit's sources) serialises without its
+functions on the CPU, and a later process that loads it fails to run it ("Function ...
+not found"); such a program is stored as StableHLO, as before. Without the persistent cache
+(the default for the Python API and the test suite) a :class:`Program` is a plain
 ``jax.jit`` of the flattened function.
 
 A stored program is found by a key that names everything its code depends on: the
@@ -23,7 +30,7 @@ package never runs an old program). A configuration whose ``repr`` holds a memor
 address (a closure, an object without a ``repr``) would never be found again, so it is
 kept in memory only.
 
-A stored program is called, never transformed: an exported module carries no rule for
+A stored program is called, never transformed: an executable carries no rule for
 ``jax.grad`` or ``jax.vmap`` of itself, so a :class:`Program` is for the engine's
 host-side entry points (a descent, a start race, a covariance), not for functions a
 user may differentiate or map over.
@@ -37,6 +44,7 @@ import logging
 import os
 import pickle
 import re
+import threading
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -45,13 +53,20 @@ from typing import Any
 import equinox as eqx
 import jax
 import numpy as np
+from jax.experimental import serialize_executable
 
 from brdffit.util.atomic import write_atomic
 
 log = logging.getLogger(__name__)
 
 FOLDER = "programs"
-"""Subfolder of the compilation cache's folder that holds the exported programs."""
+"""Subfolder of the compilation cache's folder that holds the stored programs."""
+
+EXECUTABLE = "executable"
+"""A stored program's kind: XLA's executable, serialised; loads without lowering."""
+EXPORTED = "exported"
+"""A stored program's kind: the StableHLO module (:func:`jax.export.export`), lowered
+again when loaded; for a program whose executable came from XLA's persistent cache."""
 
 _ADDRESS = re.compile(r" at 0x[0-9a-fA-F]+")
 _PACKAGE = Path(__file__).resolve().parents[1]
@@ -66,7 +81,7 @@ class _Entry:
 
 
 class Program:
-    """``fn`` compiled per static configuration and array shapes; exported to disk when the
+    """``fn`` compiled per static configuration and array shapes; stored on disk when the
     persistent compilation cache is on (module docstring).
 
     Arguments are split as ``eqx.filter_jit`` splits them: arrays (JAX or NumPy) are the
@@ -109,14 +124,18 @@ class Program:
             # the output tree is known once the function has been traced
             entry.call = _learn_tree(entry, entry.call, trees)
             return entry
-        stored = _read(path)
+        stored = _read(path, len(key[3]))
         if stored is not None:
-            exported, out_tree = stored
-            return _Entry(jax.jit(exported.call), out_tree)
-        structs = [jax.ShapeDtypeStruct(s, np.dtype(d), weak_type=w) for s, d, w in key[3]]
-        exported = jax.export.export(jax.jit(flat))(*structs)
-        _write(path, exported, trees[-1])
-        return _Entry(jax.jit(exported.call), trees[-1])
+            return _Entry(*stored)
+        structs = [jax.ShapeDtypeStruct(s, d, weak_type=w) for s, d, w in key[3]]
+        compiled, fresh = _compile(jax.jit(flat).lower(*structs))
+        out_tree = trees[-1]
+        if fresh:
+            _write(path, EXECUTABLE, serialize_executable.serialize(compiled)[0], out_tree)
+        else:  # an executable from XLA's cache does not serialise whole (module docstring)
+            exported = jax.export.export(jax.jit(flat))(*structs)
+            _write(path, EXPORTED, bytes(exported.serialize()), out_tree)
+        return _Entry(compiled, out_tree)
 
 
 def program(fn: Callable[..., Any]) -> Program:
@@ -133,13 +152,15 @@ def _learn_tree(entry: _Entry, call: Callable[..., tuple], trees: list) -> Calla
     return first
 
 
-def _aval(x: Any) -> tuple[tuple[int, ...], str, bool]:
-    """(shape, dtype name, weak type) of an array argument."""
-    return tuple(np.shape(x)), np.dtype(x.dtype).name, bool(getattr(x, "weak_type", False))
+def _aval(x: Any) -> tuple[tuple[int, ...], np.dtype, bool]:
+    """(shape, dtype, weak type) of an array argument (JAX or NumPy: both carry a NumPy
+    ``dtype``, which hashes and prints as its name does, at a tenth of the cost of
+    looking the name up on every call)."""
+    return tuple(x.shape), x.dtype, bool(getattr(x, "weak_type", False))
 
 
 def store_folder() -> Path | None:
-    """Where exported programs are kept: ``programs/`` in the persistent compilation
+    """Where compiled programs are kept: ``programs/`` in the persistent compilation
     cache's folder, or ``None`` while that cache is off."""
     cache = jax.config.jax_compilation_cache_dir
     return Path(cache) / FOLDER if cache else None
@@ -184,30 +205,85 @@ def source_fingerprint() -> str:
     return h.hexdigest()
 
 
-def _read(path: Path) -> tuple[jax.export.Exported, Any] | None:
-    """The exported program and output tree stored at ``path``; ``None`` when absent or
-    unreadable (a damaged file is then written again)."""
+def _read(path: Path, n_args: int) -> tuple[Callable[..., tuple], Any] | None:
+    """The program stored at ``path``, ready to call (a function of ``n_args`` flat arrays
+    returning a flat tuple), and the original function's output tree; ``None`` when
+    absent or unreadable (a damaged file is then written again)."""
     try:
         with open(path, "rb") as f:
-            blob, template = pickle.load(f)
-        return jax.export.deserialize(bytearray(blob)), jax.tree.structure(template)
+            kind, blob, n_out, template = pickle.load(f)
+        if kind == EXECUTABLE:
+            _lapack_ready()
+            in_tree = jax.tree.structure((tuple(range(n_args)), {}))
+            out_tree = jax.tree.structure(tuple(range(n_out)))
+            call = serialize_executable.deserialize_and_load(blob, in_tree, out_tree)
+        else:
+            call = jax.jit(jax.export.deserialize(bytearray(blob)).call)
+        return call, jax.tree.structure(template)
     except FileNotFoundError:
         return None
-    except (OSError, EOFError, pickle.UnpicklingError, ValueError, TypeError) as err:
-        log.warning("stored program %s unreadable (%s); exporting it again", path, err)
+    except (OSError, EOFError, pickle.UnpicklingError, ValueError, TypeError, RuntimeError) as err:
+        log.warning("stored program %s unreadable (%s); compiling it again", path, err)
         return None
 
 
-def _write(path: Path, exported: jax.export.Exported, out_tree: Any) -> None:
-    """Store the program and its output tree; a folder that cannot be written only costs
-    the next process the tracing again.
+def _compile(lowered: jax.stages.Lowered) -> tuple[jax.stages.Compiled, bool]:
+    """``lowered`` compiled, and whether XLA compiled it here (``False``: its executable
+    came from XLA's persistent cache, told by the cache-hit event JAX records in the
+    compiling thread)."""
+    _listening()
+    before = getattr(_HITS, "n", 0)
+    compiled = lowered.compile()
+    return compiled, getattr(_HITS, "n", 0) == before
 
-    The tree is stored as an example output whose leaves are their indices: a tree
-    definition of equinox modules does not survive pickling, the modules themselves do.
+
+_HITS = threading.local()
+"""Per thread: how many of its compiles XLA's persistent cache answered."""
+
+
+@functools.cache
+def _listening() -> None:
+    """Count XLA's cache hits per thread (:data:`_HITS`), from the first compile on."""
+
+    def on_event(event: str, **_: Any) -> None:
+        if event == "/jax/compilation_cache/cache_hits":
+            _HITS.n = getattr(_HITS, "n", 0) + 1
+
+    jax.monitoring.register_event_listener(on_event)
+
+
+@functools.cache
+def _lapack_ready() -> None:
+    """Register LAPACK's kernels with XLA, once per process, before a stored executable
+    runs.
+
+    jaxlib registers them lazily, when a program that uses them (a Cholesky solve) is
+    lowered; a loaded executable was not lowered in this process, and calling one before
+    that registration crashes the process (a segmentation fault).
+    :func:`jax.export.deserialize` makes the same call for the same reason; where a
+    later JAX moves it, lowering a 1 x 1 Cholesky does it through the public API (0.13 s
+    in a fresh process instead of nothing extra).
+    """
+    try:
+        from jax._src.lax.linalg import initialize_lapack
+    except ImportError:
+        jax.jit(jax.numpy.linalg.cholesky).lower(jax.ShapeDtypeStruct((1, 1), np.float64))
+    else:
+        initialize_lapack()
+
+
+def _write(path: Path, kind: str, blob: bytes, out_tree: Any) -> None:
+    """Store a program (``kind`` :data:`EXECUTABLE` or :data:`EXPORTED`, serialised as
+    ``blob``) and its output tree; a folder that cannot be written only costs the next
+    process the compile again.
+
+    The trees are stored as counts and as an example output whose leaves are their
+    indices: a tree definition of equinox modules does not survive pickling, the modules
+    themselves do.
     """
     template = jax.tree.unflatten(out_tree, range(out_tree.num_leaves))
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
-        write_atomic(path, [pickle.dumps((bytes(exported.serialize()), template))])
+        write_atomic(path, [pickle.dumps((kind, blob, out_tree.num_leaves, template))])
     except OSError as err:
         log.warning("could not store program %s: %s", path, err)
