@@ -126,7 +126,9 @@ class Program:
             return entry
         stored = _read(path, len(key[3]))
         if stored is not None:
-            return _Entry(*stored)
+            entry = _Entry(*stored)
+            entry.call = _checked(entry, entry.call, jax.jit(flat), path)
+            return entry
         structs = [jax.ShapeDtypeStruct(s, d, weak_type=w) for s, d, w in key[3]]
         compiled, fresh = _compile(jax.jit(flat).lower(*structs))
         out_tree = trees[-1]
@@ -147,6 +149,28 @@ def _learn_tree(entry: _Entry, call: Callable[..., tuple], trees: list) -> Calla
     def first(*xs):
         out = call(*xs)
         entry.out_tree, entry.call = trees[-1], call
+        return out
+
+    return first
+
+
+def _checked(
+    entry: _Entry, loaded: Callable[..., tuple], fallback: Callable[..., tuple], path: Path
+) -> Callable[..., tuple]:
+    """``loaded`` (a stored program) for ``entry``, but if its first call fails in XLA's
+    runtime (an executable that loads and cannot run, such as one that serialised
+    without its functions), the file is removed and ``fallback`` (the function compiled
+    in this process) runs instead, now and from then on."""
+
+    def first(*xs):
+        try:
+            out = loaded(*xs)
+        except jax.errors.JaxRuntimeError as err:
+            log.warning("stored program %s failed to run (%s); compiling it again", path, err)
+            path.unlink(missing_ok=True)
+            entry.call = fallback
+            return fallback(*xs)
+        entry.call = loaded
         return out
 
     return first

@@ -45,6 +45,26 @@ def test_without_the_persistent_cache_nothing_is_stored():
     assert programs.store_folder() is None
 
 
+def test_a_stored_program_that_cannot_run_is_removed_and_compiled_again(tmp_path, caplog):
+    path = tmp_path / "race-0.pkl"
+    path.write_bytes(b"an executable that loads")
+    calls = []
+
+    def loaded(*xs):
+        calls.append("loaded")
+        raise jax.errors.JaxRuntimeError("NOT_FOUND: Function fusion not found")
+
+    def fallback(*xs):
+        calls.append("fallback")
+        return (sum(xs),)
+
+    entry = programs._Entry(loaded)
+    entry.call = programs._checked(entry, loaded, fallback, path)
+    assert entry.call(1, 2) == (3,) and entry.call(3, 4) == (7,)
+    assert calls == ["loaded", "fallback", "fallback"]  # tried once, then never again
+    assert not path.exists() and "failed to run" in caplog.text
+
+
 _SCRIPT = textwrap.dedent(
     """
     import json, pickle, sys
