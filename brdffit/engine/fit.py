@@ -163,14 +163,13 @@ class _Batch:
     def solve(self, rows: Sequence[int]) -> list[FitResult]:
         """The problems ``rows`` solved together (:class:`Engine`), each assembled."""
         other = starts.OTHER_METRIC[self.m.log1p]
-        padded = [self.per[i][self.m.name].padded() for i in rows]
+        preps = [self.per[i][self.m.name] for i in rows]
+        padded = [p.padded() for p in preps]
         engine = Engine(self.obj, self.s, [self.per[i][other] for i in rows])
         chunks = None
         if len(rows) == 1 and self.s.robust is None:
-            i = rows[0]
-            if resolve(self.s.errors, self.datasets[i].synthetic) == "blocks":
-                chunks = block_chunks(self.per[i][self.m.name])
-        preps = [self.per[i][self.m.name] for i in rows]
+            if resolve(self.s.errors, self.datasets[rows[0]].synthetic) == "blocks":
+                chunks = block_chunks(preps[0])
         outcomes = engine.run(preps, padded, self.first, chunks)
         out = []
         for i, o, q in zip(rows, outcomes, padded, strict=True):

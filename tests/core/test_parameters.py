@@ -114,15 +114,11 @@ def test_a_product_pair_is_solved_as_log_product_and_reciprocal(b, c):
 
 
 @settings(max_examples=20, deadline=None)
-@given(
-    b=st.lists(st.floats(0.1, 1e8), min_size=1, max_size=5),
-    c=st.lists(st.floats(1e-3, 10.0), min_size=5, max_size=5),
-)
-def test_solver_rows_are_each_row_mapped_by_to_solver(b, c):
+@given(bc=st.lists(st.tuples(st.floats(0.1, 1e8), st.floats(1e-3, 10.0)), min_size=1, max_size=5))
+def test_solver_rows_are_each_row_mapped_by_to_solver(bc):
     # many starts packed at once on the host (the pair included) against the traced map
     lay = _low_layout()
-    base = models.get("low").defaults()
-    rows = [base | {"B": v, "C": w} for v, w in zip(b, c[: len(b)], strict=True)]
+    rows = [models.get("low").defaults() | {"B": b, "C": c} for b, c in bc]
     expected = [np.asarray(lay.to_solver(jnp.asarray(lay.natural_vector(p)))) for p in rows]
     np.testing.assert_allclose(lay.solver_rows(rows), np.stack(expected), rtol=1e-12, atol=1e-12)
     assert lay.solver_rows([]).shape == (0, lay.size)
