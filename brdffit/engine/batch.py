@@ -107,14 +107,14 @@ class Engine:
         thinned, n_small = small[0] is not preps[0], small[0].n
         small = [p.padded() for p in small]
         osmall = [o.padded(geometry=sp) for o, sp in zip(osmall, small, strict=True)]
-        near, spread = starts.draws(
+        near, spread, cube = starts.draws(
             obj.layout, first, n_restarts=s.n_restarts, screen=s.screen,
             rng=np.random.default_rng(s.seed),
         )  # fmt: skip
-        zs = np.asarray(self._select(obj, near, spread, small))  # (P, S, k)
+        zs = np.asarray(self._select(obj, near, spread, cube, small))  # (P, S, k)
         extra = np.zeros(n_problems, int)
         if len(spread):
-            cross, extra = self._cross_metric_start(near, spread, small, osmall)
+            cross, extra = self._cross_metric_start(near, spread, cube, small, osmall)
             zs = np.concatenate([zs, cross[:, None, :]], axis=1)
         n_mid = refine_size(preps[0].n, n_small) if thinned else None
         mid = None if n_mid is None else [_subset(p, n_mid).padded() for p in preps]
@@ -140,7 +140,7 @@ class Engine:
                 Outcome(
                     z=st.z[i], status=status, binding=st.binding[i],
                     start=obj.params(origin[i]), n_steps=int(steps[i]),
-                    n_starts=zs.shape[1],
+                    n_starts=int(np.all(np.isfinite(zs[i]), axis=1).sum()),
                     coarse=(n_small, int(coarse_steps[i])) if thinned else (0, 0),
                     robust_scale=scales[i],
                     cost=None if st.kept is None else float(st.cost[i]),
@@ -149,7 +149,9 @@ class Engine:
             )  # fmt: skip
         return out
 
-    def _cross_metric_start(self, near, spread, small, osmall) -> tuple[np.ndarray, np.ndarray]:
+    def _cross_metric_start(
+        self, near, spread, cube, small, osmall
+    ) -> tuple[np.ndarray, np.ndarray]:
         """Step 4 of :mod:`brdffit.engine.starts`: per problem, the lowest descent of the
         candidates under the other kind of metric (on ``osmall``, its thinned data
         prepared for that metric), affine parameters solved again under the fit's own;
@@ -158,9 +160,9 @@ class Engine:
         The metric is data (:class:`brdffit.engine.metrics.Prepared`), so this race is the
         fit's own race's compiled program when it has as many starts: the fit's own
         gets this one's winner as an extra start, so one start of NaN is added here
-        (it stops at once, :attr:`brdffit.engine.lm.Reason.NONFINITE`, and is never picked)."""
+        (it stops before any step, :func:`brdffit.engine.lm.init`, and is never picked)."""
         obj = self.obj
-        zs = self._select(obj, near, spread, osmall)
+        zs = self._select(obj, near, spread, cube, osmall)
         zs = np.concatenate([zs, np.full_like(zs[:, :1], np.nan)], axis=1)
         d = self._descend(obj, zs, osmall)
         cost = np.asarray(d.cost)
@@ -173,11 +175,12 @@ class Engine:
         return np.asarray(solved), np.asarray(d.steps).sum(axis=1)
 
     @staticmethod
-    def _select(obj, near, spread, small):
-        """Each problem's starts (same draws, its own affine solves), (P, S, k)."""
+    def _select(obj, near, spread, cube, small):
+        """Each problem's starts (same draws, its own affine solves and screen), (P, S, k);
+        rows the screen leaves out are NaN (:func:`brdffit.engine.starts.select`)."""
         if len(small) == 1:
-            return np.asarray(starts.select_one(obj, near, spread, small[0]))[None]
-        return _select_many(obj, near, spread, _stack(small))
+            return np.asarray(starts.select_one(obj, near, spread, cube, small[0]))[None]
+        return _select_many(obj, near, spread, cube, _stack(small))
 
     def _stage(self, obj, zs, problems: _Problems) -> _Stage:
         """Descend every start of every problem on the thinned samples; finish the lowest
@@ -230,8 +233,8 @@ class Engine:
 
 
 @program
-def _select_many(obj, near, spread, prep):
-    return lax.map(lambda p: starts.select(obj, near, spread, p), prep)
+def _select_many(obj, near, spread, cube, prep):
+    return lax.map(lambda p: starts.select(obj, near, spread, cube, p), prep)
 
 
 @program

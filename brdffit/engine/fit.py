@@ -73,8 +73,9 @@ def fit(
       parameters leave the fit and get zero standard error.
     - ``cut_deg``: zenith-angle cut for both directions, degrees (``None``: none).
     - ``n_restarts``: seeded random starts near the first one (:mod:`brdffit.engine.starts`).
-    - ``screen``: candidates spread over the nonlinear parameters' ranges; the cheapest
-      few become starts. 0 turns the screen off.
+    - ``screen``: candidates spread over the nonlinear parameters' ranges; of the
+      cheapest few, those with no cheaper candidate near them become starts (one per
+      valley). 0 turns the screen off.
     - ``max_steps``: tried LM steps per descent. ``ftol``, ``xtol``, ``gtol``: relative
       stopping tolerances (:mod:`brdffit.engine.lm`).
     - ``errors``: ``"auto"`` (default: ``"blocks"`` for measured data, ``"sandwich"`` for

@@ -204,14 +204,17 @@ def init(obj: LeastSquares, z0: Array, prep: Any, lo: Array, hi: Array, tol: Tol
     """The state at ``z0`` (clipped into the box), not linearised yet: the first
     iteration of the loop does that (:func:`step`), so a compiled descent holds one copy
     of the linearisation (the Jacobian pass, most of what XLA compiles), not two.
-    ``obj``, ``prep`` and ``tol`` are those :func:`step` gets."""
+    ``obj``, ``prep`` and ``tol`` are those :func:`step` gets. A ``z0`` with a NaN or Inf
+    is stopped here (``NONFINITE``, no step, no pass): that is how a race of a fixed
+    number of rows leaves a row out (:func:`brdffit.engine.starts.select`)."""
     z = jnp.clip(z0, lo, hi)
     zero, one = jnp.zeros((z.size, z.size), z.dtype), jnp.ones((), z.dtype)
     kept = obj.nothing_kept(z) if hasattr(obj, "nothing_kept") else ()
     return Descent(
         z=z, cost=jnp.inf * one, g=jnp.zeros_like(z), h=zero, curv=zero,
         augmented=jnp.zeros((), bool), slow=jnp.zeros((), bool), lam=TAU * one, nu=2.0 * one,
-        d=jnp.ones_like(z), steps=jnp.zeros((), int), reason=jnp.asarray(Reason.RUNNING),
+        d=jnp.ones_like(z), steps=jnp.zeros((), int),
+        reason=jnp.where(jnp.all(jnp.isfinite(z)), Reason.RUNNING, Reason.NONFINITE),
         binding=jnp.zeros(z.shape, bool), fresh=jnp.ones((), bool),
         kept=kept,
     )  # fmt: skip

@@ -6,11 +6,13 @@ The candidates, in order (every one with its affine parameters solved, see
 1. the defaults, or the user's ``init``;
 2. ``n_restarts`` seeded random draws of the nonlinear parameters near the first
    (``N(0, 1)`` in each parameter's unconstrained space);
-3. the ``SCREEN_KEEP`` cheapest of ``screen`` candidates spread over the nonlinear
-   parameters' whole ranges (a space-filling screen: a local descent started with a
-   lobe far too wide or too narrow can end in a corner minimum; the cost over
-   candidates spread across the range finds the right basin for a few dozen model
-   evaluations);
+3. of ``screen`` candidates spread over the nonlinear parameters' whole ranges (a
+   space-filling screen: a local descent started with a lobe far too wide or too
+   narrow can end in a corner minimum; the cost over candidates spread across the
+   range finds the right basin for a few dozen model evaluations), those among the
+   ``SCREEN_KEEP`` cheapest that no cheaper candidate lies near (Multi-Level Single
+   Linkage, :func:`critical_distance`): one start per valley of the screen, not
+   several down the same slope;
 4. with the screen on, the *cross-metric start*: the same candidates selected and
    descended under the other kind of metric (:data:`OTHER_METRIC`), the lowest of
    those with its affine parameters solved again under the fit's own metric.
@@ -23,6 +25,8 @@ cross-metric start's candidates are raced the same way under the other metric.
 """
 
 from __future__ import annotations
+
+import math
 
 import jax
 import jax.numpy as jnp
@@ -37,9 +41,16 @@ from brdffit.engine.objective import Objective
 from brdffit.util.programs import program
 
 SCREEN_KEEP = 8
-"""Screened candidates kept as starts: the cheapest at the candidate is not always the
-one that descends lowest (Low's model with 30% noise: the cheapest ends in a
-Fresnel-saturated corner, the second cheapest at the optimum), so several go on."""
+"""Screened candidates that may become starts: the cheapest at the candidate is not
+always the one that descends lowest (Low's model with 30% noise: the cheapest ends in a
+Fresnel-saturated corner, the second cheapest at the optimum), so several may go on;
+of these, :func:`select` keeps those no cheaper candidate lies near."""
+
+MLSL_SIGMA = 2.0
+"""``sigma`` of Multi-Level Single Linkage's critical distance (:func:`critical_distance`):
+Rinnooy Kan & Timmer (1987, part II) prove that for ``sigma > 0`` every local minimum is
+found with probability 1 as the sample grows (for ``sigma > 4`` with finitely many
+local searches); 2 is the value NLopt's MLSL takes from their papers (``MLSL_SIGMA``)."""
 
 OTHER_METRIC = {False: "low_e2", True: "ngan"}
 """The cross-metric start's metric, keyed on whether the fit's metric is a log one.
@@ -96,10 +107,24 @@ def _near(layout: ParameterLayout, base: Params, rng: np.random.Generator) -> Pa
     return out
 
 
+def critical_distance(n: int, dim: int) -> float:
+    """Multi-Level Single Linkage's critical distance for ``n`` points in the unit cube of
+    ``dim`` dimensions (Rinnooy Kan & Timmer 1987, part II, eq. 8):
+    ``r = pi^(-1/2) (Gamma(1 + dim/2) sigma ln(n) / n)^(1/dim)``, ``sigma`` =
+    :data:`MLSL_SIGMA`. A local search starts from a point only if no point of lower cost
+    lies within ``r`` of it: the ball of radius ``r`` holds ``sigma ln(n)`` points on
+    average, so a point with a cheaper one that near is most likely on the same slope."""
+    if n < 2 or dim < 1:
+        return 0.0
+    ball = math.gamma(1.0 + dim / 2.0) * MLSL_SIGMA * math.log(n) / n
+    return ball ** (1.0 / dim) / math.sqrt(math.pi)
+
+
 def _spread(
     layout: ParameterLayout, base: Params, n: int, rng: np.random.Generator
-) -> list[dict[str, object]]:
-    """``n`` candidates filling the nonlinear parameters' ranges (affine ones as ``base``).
+) -> tuple[list[dict[str, object]], np.ndarray]:
+    """``n`` candidates filling the nonlinear parameters' ranges (affine ones as ``base``),
+    and where each lies in the unit cube of the nonlinear scalars (n, d).
 
     A scrambled Sobol sequence (``scipy.stats.qmc``) gives each nonlinear scalar a
     quantile ``q`` in (0, 1), mapped so that the candidates cover the range evenly: a
@@ -112,6 +137,7 @@ def _spread(
     shape_free = [p for p in layout.free if not p.linear]
     dim = sum(p.size for p in shape_free)
     q = qmc.Sobol(dim, scramble=True, seed=rng).random(n) if dim else np.zeros((n, 0))
+    cube = q.copy()
     out = [dict(base) for _ in range(n)]
     i = 0
     for p in shape_free:
@@ -128,7 +154,7 @@ def _spread(
         for c, row in zip(out, x, strict=True):
             c[p.name] = row
         i += p.size
-    return out
+    return out, cube
 
 
 def draws(
@@ -138,25 +164,33 @@ def draws(
     n_restarts: int,
     screen: int,
     rng: np.random.Generator,
-) -> tuple[np.ndarray, np.ndarray]:
-    """The candidates before any data are seen, in solver space: ``(near, spread)``.
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The candidates before any data are seen: ``(near, spread, cube)``.
 
     ``near`` (1 + n_restarts, k): the first start and the random draws near it;
     ``spread`` (screen, k): the screen's candidates (none when ``screen`` is 0 or every
-    free parameter is affine). They depend on the seed only, so many problems share them.
+    free parameter is affine); both in solver space. ``cube`` (screen, d): where each
+    screen candidate lies in the unit cube of the d nonlinear scalars, the space of
+    :func:`select`'s distances. They depend on the seed only, so many problems share
+    them.
     """
     near = [first] + [_near(layout, first, rng) for _ in range(n_restarts)]
-    spread = []
-    if screen and any(not p.linear for p in layout.free):
-        spread = _spread(layout, first, screen, rng)
     k = layout.size
-    return _stack(layout, near), _stack(layout, spread) if spread else np.zeros((0, k))
+    if not (screen and any(not p.linear for p in layout.free)):
+        return _stack(layout, near), np.zeros((0, k)), np.zeros((0, 0))
+    spread, cube = _spread(layout, first, screen, rng)
+    return _stack(layout, near), _stack(layout, spread), cube
 
 
-def select(obj: Objective, near: jax.Array, spread: jax.Array, prep: Prepared) -> jax.Array:
-    """The starts (S, k) on ``prep``: every ``near`` row and the ``SCREEN_KEEP`` cheapest
-    ``spread`` rows, each with its affine parameters solved (traceable; a candidate with
-    a non-finite cost sorts last and, if kept, loses its descent)."""
+def select(
+    obj: Objective, near: jax.Array, spread: jax.Array, cube: jax.Array, prep: Prepared
+) -> jax.Array:
+    """The starts (S, k) on ``prep``, each with its affine parameters solved: every
+    ``near`` row, then the ``SCREEN_KEEP`` cheapest ``spread`` rows, of which those with
+    a cheaper candidate within :func:`critical_distance` in ``cube`` (Multi-Level Single
+    Linkage) are rows of NaN, which a descent stops at once
+    (:func:`brdffit.engine.lm.init`). Traceable, so S is fixed; a candidate with a
+    non-finite cost sorts last and, if kept, loses its descent."""
     solve = jax.vmap(lambda z: linear_start(obj, z, prep))
     out = solve(near)
     if spread.shape[0] == 0:
@@ -165,7 +199,17 @@ def select(obj: Objective, near: jax.Array, spread: jax.Array, prep: Prepared) -
     costs = jax.vmap(lambda z: obj.cost(z, prep))(zs)
     costs = jnp.where(jnp.isfinite(costs), costs, jnp.inf)
     order = jnp.argsort(costs, stable=True)[: min(SCREEN_KEEP, spread.shape[0])]
-    return jnp.concatenate([out, zs[order]])
+    behind = shadowed(costs, cube, critical_distance(*cube.shape))
+    kept = jnp.where(behind[order, None], jnp.nan, zs[order])
+    return jnp.concatenate([out, kept])
+
+
+def shadowed(costs: jax.Array, points: jax.Array, r: float) -> jax.Array:
+    """Per point (n,), whether a point of strictly lower cost lies within distance ``r``
+    of it (Euclidean, ``points`` (n, d)): the points Multi-Level Single Linkage starts no
+    local search from. Traceable."""
+    d2 = jnp.sum((points[:, None, :] - points[None, :, :]) ** 2, axis=-1)
+    return jnp.any((costs[None, :] < costs[:, None]) & (d2 <= r * r), axis=1)
 
 
 @program
@@ -175,9 +219,11 @@ def linear_start_one(obj: Objective, z: jax.Array, prep: Prepared) -> jax.Array:
 
 
 @program
-def select_one(obj: Objective, near: jax.Array, spread: jax.Array, prep: Prepared) -> jax.Array:
+def select_one(
+    obj: Objective, near: jax.Array, spread: jax.Array, cube: jax.Array, prep: Prepared
+) -> jax.Array:
     """:func:`select` compiled for one problem."""
-    return select(obj, near, spread, prep)
+    return select(obj, near, spread, cube, prep)
 
 
 def _stack(layout: ParameterLayout, params: list[dict[str, object]]) -> np.ndarray:
