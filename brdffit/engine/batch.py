@@ -111,12 +111,10 @@ class Engine:
             obj.layout, first, n_restarts=s.n_restarts, screen=s.screen,
             rng=np.random.default_rng(s.seed),
         )  # fmt: skip
-        # (P, M, S, k): the fit's metric, and the other one when there is a screen
-        both = self._select(obj, near, spread, cube, [small, osmall] if len(spread) else [small])
-        zs = both[:, 0]
+        zs = np.asarray(self._select(obj, near, spread, cube, small))  # (P, S, k)
         extra = np.zeros(n_problems, int)
         if len(spread):
-            cross, extra = self._cross_metric_start(both[:, 1], small, osmall)
+            cross, extra = self._cross_metric_start(near, spread, cube, small, osmall)
             zs = np.concatenate([zs, cross[:, None, :]], axis=1)
         n_mid = refine_size(preps[0].n, n_small) if thinned else None
         mid = None if n_mid is None else [_subset(p, n_mid).padded() for p in preps]
@@ -151,17 +149,20 @@ class Engine:
             )  # fmt: skip
         return out
 
-    def _cross_metric_start(self, zs, small, osmall) -> tuple[np.ndarray, np.ndarray]:
+    def _cross_metric_start(
+        self, near, spread, cube, small, osmall
+    ) -> tuple[np.ndarray, np.ndarray]:
         """Step 4 of :mod:`brdffit.engine.starts`: per problem, the lowest descent of the
-        starts ``zs`` (P, S, k) selected under the other kind of metric (on ``osmall``,
-        its thinned data prepared for that metric), affine parameters solved again under
-        the fit's own; and the steps spent on it.
+        candidates under the other kind of metric (on ``osmall``, its thinned data
+        prepared for that metric), affine parameters solved again under the fit's own;
+        and the steps spent on it.
 
         The metric is data (:class:`brdffit.engine.metrics.Prepared`), so this race is the
         fit's own race's compiled program when it has as many starts: the fit's own
         gets this one's winner as an extra start, so one start of NaN is added here
         (it stops before any step, :func:`brdffit.engine.lm.init`, and is never picked)."""
         obj = self.obj
+        zs = self._select(obj, near, spread, cube, osmall)
         zs = np.concatenate([zs, np.full_like(zs[:, :1], np.nan)], axis=1)
         d = self._descend(obj, zs, osmall)
         cost = np.asarray(d.cost)
@@ -174,16 +175,12 @@ class Engine:
         return np.asarray(solved), np.asarray(d.steps).sum(axis=1)
 
     @staticmethod
-    def _select(obj, near, spread, cube, by_metric: list[list]) -> np.ndarray:
-        """Each problem's starts under each metric (same draws, its own affine solves and
-        screen), (P, M, S, k) for ``by_metric[m][p]`` the thinned data of problem p
-        prepared for metric m; rows the screen leaves out are NaN
-        (:func:`brdffit.engine.starts.select`)."""
-        if len(by_metric[0]) == 1:
-            preps = tuple(m[0] for m in by_metric)
-            return np.asarray(starts.select_one(obj, near, spread, cube, preps))[None]
-        stacked = tuple(_stack(m) for m in by_metric)
-        return np.asarray(_select_many(obj, near, spread, cube, stacked))
+    def _select(obj, near, spread, cube, small):
+        """Each problem's starts (same draws, its own affine solves and screen), (P, S, k);
+        rows the screen leaves out are NaN (:func:`brdffit.engine.starts.select`)."""
+        if len(small) == 1:
+            return np.asarray(starts.select_one(obj, near, spread, cube, small[0]))[None]
+        return _select_many(obj, near, spread, cube, _stack(small))
 
     def _stage(self, obj, zs, problems: _Problems) -> _Stage:
         """Descend every start of every problem on the thinned samples; finish the lowest
@@ -236,8 +233,8 @@ class Engine:
 
 
 @program
-def _select_many(obj, near, spread, cube, preps):
-    return lax.map(lambda ps: starts.select(obj, near, spread, cube, ps), preps)
+def _select_many(obj, near, spread, cube, prep):
+    return lax.map(lambda p: starts.select(obj, near, spread, cube, p), prep)
 
 
 @program

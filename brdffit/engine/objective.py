@@ -95,11 +95,7 @@ class Objective(eqx.Module):
 
     def cost(self, z: Float[Array, " k"], prep: Prepared) -> Float[Array, ""]:
         """``0.5 sum rho(r^2)`` at ``z``."""
-        return self.cost_of(self.model.evaluate(self.params(z), prep.g), prep)
-
-    def cost_of(self, f: Float[Array, "n 3"], prep: Prepared) -> Float[Array, ""]:
-        """``0.5 sum rho(r^2)`` of the model's values ``f`` (N, 3) on ``prep``'s samples."""
-        r = robust_mod.robust_residuals(misfit.residuals(f, prep), self.robust, self.scale)
+        r = robust_mod.robust_residuals(self.residuals(z, prep), self.robust, self.scale)
         return 0.5 * jnp.sum(r * r)
 
     @property

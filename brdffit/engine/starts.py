@@ -27,7 +27,6 @@ cross-metric start's candidates are raced the same way under the other metric.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
 
 import jax
 import jax.numpy as jnp
@@ -58,9 +57,9 @@ Against the eight cheapest candidates (the screen before): the stress suite
 outlier cases that are not identifiable move, 13 -> 14 and 8 -> 6 of 20 starts); of the
 1,302 default fits of the published record (``benchmarks/results/published_record.md``)
 1,265 end at the same loss, 16 lower and 21 higher (median 0.6%, at most 12%), every one
-still at or below the published fit. ``sigma = 1`` (a radius
-half as long in one dimension) ends 18 of those 37 higher, so the cost is in starting
-fewer descents, not in this constant."""
+still at or below the published fit. ``sigma`` at 1 or 0.5 (a critical distance a half
+and a quarter as long in one dimension, 0.71 and 0.5 times in two) leaves 18 and 17 of
+those 37 higher, so the cost is in starting fewer descents, not in this constant."""
 
 OTHER_METRIC = {False: "low_e2", True: "ngan"}
 """The cross-metric start's metric, keyed on whether the fit's metric is a log one.
@@ -86,34 +85,11 @@ def linear_start(obj: Objective, z: jax.Array, prep: Prepared) -> jax.Array:
     ``ln(1 + x)``, so the solve is the linearised log-space fit. The normal equations
     (k x k, k the affine scalars) are solved by Cholesky.
     """
-    return _solve_affine(obj, z, *_split(obj, z, prep.g), prep)[0]
-
-
-def _affine(obj: Objective) -> tuple[tuple[str, ...], np.ndarray]:
-    """The affine parameters' names and where their scalars sit in ``z`` (in that order)."""
-    free = obj.layout.free
-    names = tuple(p.name for p in free if p.linear and not p.solver_log)
-    mask = [np.full(p.size, p.name in names) for p in free]
-    return names, np.flatnonzero(np.concatenate(mask)) if mask else np.zeros(0, int)
-
-
-def _split(obj: Objective, z: jax.Array, g) -> tuple[jax.Array, jax.Array | None]:
-    """``(f0, basis)`` of :func:`~brdffit.core.abstract_model.linear_split` at ``z`` on the
-    geometry ``g``; with no affine parameter, the model's values at ``z`` and ``None``."""
-    names, _ = _affine(obj)
+    layout = obj.layout
+    names = tuple(p.name for p in layout.free if p.linear and not p.solver_log)
     if not names:
-        return obj.model.evaluate(obj.params(z), g), None
-    return linear_split(obj.model, obj.params(z), g, names)
-
-
-def _solve_affine(
-    obj: Objective, z: jax.Array, f0: jax.Array, basis: jax.Array | None, prep: Prepared
-) -> tuple[jax.Array, jax.Array]:
-    """:func:`linear_start` from ``z``'s :func:`_split`, and the model's values there,
-    ``f0 + basis x`` (exact: the model is affine in ``x``), so no second evaluation."""
-    if basis is None:
-        return z, f0
-    _, where = _affine(obj)
+        return z
+    f0, basis = linear_split(obj.model, obj.params(z), prep.g, names)
     w = jnp.sqrt(prep.weight) * prep.cos_i[:, None]
     slope = 1.0 / (1.0 + jnp.maximum(prep.values * prep.cos_i[:, None], 0.0))
     w = jnp.where(prep.log1p, w * slope, w)
@@ -122,10 +98,12 @@ def _solve_affine(
     ata = a.T @ a
     ridge = RIDGE * jnp.max(jnp.diag(ata)) * jnp.eye(ata.shape[0], dtype=ata.dtype)
     x = jax.scipy.linalg.cho_solve((jnp.linalg.cholesky(ata + ridge), True), a.T @ b)
-    lo, hi = obj.layout.solver_bounds()
-    out = jnp.clip(z.at[where].set(x), lo, hi)
-    out = jnp.where(jnp.all(jnp.isfinite(out)), out, z)
-    return out, f0 + basis @ out[where]
+    # the affine scalars sit in z in the order their names (and x) have
+    where = np.flatnonzero(np.concatenate([np.full(p.size, p.name in names) for p in layout.free]))
+    out = z.at[where].set(x)
+    lo, hi = layout.solver_bounds()
+    out = jnp.clip(out, lo, hi)
+    return jnp.where(jnp.all(jnp.isfinite(out)), out, z)
 
 
 def _near(layout: ParameterLayout, base: Params, rng: np.random.Generator) -> Params:
@@ -214,35 +192,25 @@ def draws(
 
 
 def select(
-    obj: Objective, near: jax.Array, spread: jax.Array, cube: jax.Array, preps: Sequence[Prepared]
+    obj: Objective, near: jax.Array, spread: jax.Array, cube: jax.Array, prep: Prepared
 ) -> jax.Array:
-    """The starts (M, S, k), one set per ``preps`` (M metrics on the same samples and
-    geometry), each with its affine parameters solved under that metric: every ``near``
-    row, then the ``SCREEN_KEEP`` cheapest ``spread`` rows, of which those with a cheaper
-    candidate within :func:`critical_distance` in ``cube`` (Multi-Level Single Linkage)
-    are rows of NaN, which a descent stops at once (:func:`brdffit.engine.lm.init`).
-
-    The model is evaluated once per candidate for all metrics (:func:`_split`; a
-    candidate's cost comes from its affine values). Traceable, so S is fixed; a
-    candidate with a non-finite cost sorts last and, if kept, loses its descent."""
-    g = preps[0].g
-    near_split = jax.vmap(lambda z: _split(obj, z, g))(near)
-    spread_split = jax.vmap(lambda z: _split(obj, z, g))(spread)
-    keep = min(SCREEN_KEEP, spread.shape[0])
-    out = []
-    for prep in preps:
-        solve = jax.vmap(lambda z, f0, b, p=prep: _solve_affine(obj, z, f0, b, p))
-        zn = solve(near, *near_split)[0]
-        if keep == 0:
-            out.append(zn)
-            continue
-        zs, fs = solve(spread, *spread_split)
-        costs = jax.vmap(lambda f, p=prep: obj.cost_of(f, p))(fs)
-        costs = jnp.where(jnp.isfinite(costs), costs, jnp.inf)
-        order = jnp.argsort(costs, stable=True)[:keep]
-        behind = shadowed(costs, cube, critical_distance(*cube.shape))
-        out.append(jnp.concatenate([zn, jnp.where(behind[order, None], jnp.nan, zs[order])]))
-    return jnp.stack(out)
+    """The starts (S, k) on ``prep``, each with its affine parameters solved: every
+    ``near`` row, then the ``SCREEN_KEEP`` cheapest ``spread`` rows, of which those with
+    a cheaper candidate within :func:`critical_distance` in ``cube`` (Multi-Level Single
+    Linkage) are rows of NaN, which a descent stops at once
+    (:func:`brdffit.engine.lm.init`). Traceable, so S is fixed; a candidate with a
+    non-finite cost sorts last and, if kept, loses its descent."""
+    solve = jax.vmap(lambda z: linear_start(obj, z, prep))
+    out = solve(near)
+    if spread.shape[0] == 0:
+        return out
+    zs = solve(spread)
+    costs = jax.vmap(lambda z: obj.cost(z, prep))(zs)
+    costs = jnp.where(jnp.isfinite(costs), costs, jnp.inf)
+    order = jnp.argsort(costs, stable=True)[: min(SCREEN_KEEP, spread.shape[0])]
+    behind = shadowed(costs, cube, critical_distance(*cube.shape))
+    kept = jnp.where(behind[order, None], jnp.nan, zs[order])
+    return jnp.concatenate([out, kept])
 
 
 def shadowed(costs: jax.Array, points: jax.Array, r: float) -> jax.Array:
@@ -261,10 +229,10 @@ def linear_start_one(obj: Objective, z: jax.Array, prep: Prepared) -> jax.Array:
 
 @program
 def select_one(
-    obj: Objective, near: jax.Array, spread: jax.Array, cube: jax.Array, preps: tuple
+    obj: Objective, near: jax.Array, spread: jax.Array, cube: jax.Array, prep: Prepared
 ) -> jax.Array:
     """:func:`select` compiled for one problem."""
-    return select(obj, near, spread, cube, preps)
+    return select(obj, near, spread, cube, prep)
 
 
 def _stack(layout: ParameterLayout, params: list[dict[str, object]]) -> np.ndarray:
