@@ -142,7 +142,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--screen",
         type=_count,
         default=32,
-        help="candidates spread over the ranges; of the cheapest 8, one a valley starts (0: none)",
+        help="candidates over the ranges; of the 8 cheapest, one per valley starts (0: none)",
     )
     s.add_argument(
         "--robust", choices=["huber", "cauchy"], help="robust loss on the residuals (outliers)"
@@ -228,7 +228,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--screen",
         type=_count,
         default=32,
-        help="candidates spread over the ranges; of the cheapest 8, one a valley starts (0: none)",
+        help="candidates over the ranges; of the 8 cheapest, one per valley starts (0: none)",
     )
     s.add_argument("--seed", type=_seed, default=0, help=SEED_HELP)
     s.add_argument(

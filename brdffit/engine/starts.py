@@ -118,7 +118,7 @@ def _near(layout: ParameterLayout, base: Params, rng: np.random.Generator) -> Pa
 
 def critical_distance(n: int, dim: int) -> float:
     """Multi-Level Single Linkage's critical distance for ``n`` points in the unit cube of
-    ``dim`` dimensions (Rinnooy Kan & Timmer 1987, part II, eq. 8):
+    ``dim`` dimensions (Rinnooy Kan & Timmer 1987, part II):
     ``r = pi^(-1/2) (Gamma(1 + dim/2) sigma ln(n) / n)^(1/dim)``, ``sigma`` =
     :data:`MLSL_SIGMA`. A local search starts from a point only if no point of lower cost
     lies within ``r`` of it: the ball of radius ``r`` holds ``sigma ln(n)`` points on
