@@ -148,7 +148,6 @@ def _spread(
     shape_free = [p for p in layout.free if not p.linear]
     dim = sum(p.size for p in shape_free)
     q = qmc.Sobol(dim, scramble=True, seed=rng).random(n) if dim else np.zeros((n, 0))
-    cube = q.copy()
     out = [dict(base) for _ in range(n)]
     i = 0
     for p in shape_free:
@@ -165,7 +164,7 @@ def _spread(
         for c, row in zip(out, x, strict=True):
             c[p.name] = row
         i += p.size
-    return out, cube
+    return out, q  # q is only read above: the quantiles are the cube
 
 
 def draws(
